@@ -1,0 +1,17 @@
+//! The `grains` command as a library: [`run`] (one run from scene to outputs, over processes
+//! or threads), [`participants`] (children and threads behind one trait), [`outputs`]
+//! (metrics and summary, atomic), [`bench`] (transport benchmarks).
+
+pub mod bench;
+pub mod outputs;
+pub mod participants;
+pub mod run;
+
+/// Exit code for an error of `grains`: 2 for bad input (scene, flags), 1 otherwise.
+pub fn exit_code(err: &anyhow::Error) -> u8 {
+    if err.downcast_ref::<grains_protocol::scene::SceneError>().is_some() || err.downcast_ref::<run::BadInput>().is_some() {
+        2
+    } else {
+        1
+    }
+}

@@ -1,0 +1,109 @@
+use clap::{Parser, Subcommand};
+use grains_launch::run::{RunOptions, TransportKind};
+use grains_protocol::Role;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// grains: hybrid discrete–continuum simulation of granular media.
+#[derive(Parser)]
+#[command(name = "grains", version)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run a scene: start its participants, show progress, write out/<scene>/<run-id>/.
+    Run {
+        /// Scene file (TOML, schema v1; see scenes/README.md).
+        scene: PathBuf,
+        /// How participants run and talk.
+        #[arg(long, value_enum, default_value_t = TransportKind::Ipc)]
+        transport: TransportKind,
+        /// Start everything but this participant and wait for it to attach (repeatable).
+        #[arg(long, value_parser = parse_role)]
+        external: Vec<Role>,
+        /// Root of the output directories.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// No live progress line.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Check a scene file and print what a run of it would start.
+    Check { scene: PathBuf },
+    /// Benchmarks that print tables (ipc: transport cost per macro-step).
+    Bench {
+        #[command(subcommand)]
+        what: BenchCmd,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchCmd {
+    /// Per-macro-step exchange time, iceoryx2 processes vs in-process threads.
+    Ipc(grains_launch::bench::IpcArgs),
+}
+
+fn parse_role(s: &str) -> Result<Role, String> {
+    Role::from_name(s)
+        .filter(|r| Role::PARTICIPANTS.contains(r))
+        .ok_or_else(|| format!("{s:?} is not a participant; one of: dem, mpm, coupler, oracle"))
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Cmd::Run {
+            scene,
+            transport,
+            external,
+            out,
+            quiet,
+        } => {
+            let opts = RunOptions {
+                scene_path: scene,
+                transport,
+                external,
+                out_root: out,
+                progress: !quiet,
+            };
+            grains_launch::run::run(&opts).map(|o| {
+                eprintln!(
+                    "grains: run {} {}: {} (output in {})",
+                    o.run_id,
+                    if o.status == grains_launch::run::Status::Completed {
+                        "completed"
+                    } else {
+                        "ended"
+                    },
+                    o.message,
+                    o.dir.display()
+                );
+                o.status.exit_code()
+            })
+        }
+        Cmd::Check { scene } => grains_protocol::scene::load(&scene).map_err(anyhow::Error::from).map(|s| {
+            let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
+            println!(
+                "{}: ok: scene {:?}, {}D, {} steps of {} s; starts {}",
+                scene.display(),
+                s.name,
+                s.dim(),
+                s.steps,
+                s.dt,
+                roles.join(", ")
+            );
+            0
+        }),
+        Cmd::Bench { what: BenchCmd::Ipc(args) } => grains_launch::bench::ipc(&args).map(|()| 0),
+    };
+    match result {
+        Ok(code) => ExitCode::from(code),
+        Err(err) => {
+            eprintln!("grains: error: {err:#}");
+            ExitCode::from(grains_launch::exit_code(&err))
+        }
+    }
+}

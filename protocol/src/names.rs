@@ -1,0 +1,138 @@
+//! Every service name of a run, one function each (the only place they are spelled).
+//!
+//! Runs are isolated by the iceoryx2 domain prefix `grains_<run-id>_` (see
+//! [`domain_prefix`]), not by the names, so the names are the same in every run. Each data
+//! service is paired with an event service of the same name: the publisher notifies after
+//! every send, the subscribers block on it.
+
+/// iceoryx2 `config.global.prefix` of a run: every shared-memory segment, socket and node file
+/// of the run starts with it, which is how a run is cleaned up and how two runs never meet.
+pub fn domain_prefix(run_id: &str) -> String {
+    format!("grains_{run_id}_")
+}
+
+/// Participant → launcher: who I am, which protocol I speak. Version-independent layout.
+pub const HELLO: ServiceSpec = ServiceSpec {
+    name: "grains/run/hello",
+    max_publishers: 8,
+    max_subscribers: 1,
+    buffer: 8,
+};
+/// Launcher → participants: accepted or refused, and why. Version-independent layout.
+pub const WELCOME: ServiceSpec = ServiceSpec {
+    name: "grains/run/welcome",
+    max_publishers: 1,
+    max_subscribers: 8,
+    buffer: 8,
+};
+/// Launcher (later the bridge) → time owner: pause, resume, stop, snapshot, set.
+pub const CONTROL: ServiceSpec = ServiceSpec {
+    name: "grains/run/control",
+    max_publishers: 2,
+    max_subscribers: 1,
+    buffer: 16,
+};
+/// Every participant → launcher: one summary per macro-step.
+pub const SUMMARY: ServiceSpec = ServiceSpec {
+    name: "grains/run/summary",
+    max_publishers: 6,
+    max_subscribers: 2,
+    buffer: 64,
+};
+/// Time owner → solvers: begin macro-step n (or stop).
+pub const STEP_BEGIN: ServiceSpec = ServiceSpec {
+    name: "grains/step/begin",
+    max_publishers: 1,
+    max_subscribers: 3,
+    buffer: 2,
+};
+/// DEM → coupler: predicted momentum and mass on grid nodes.
+pub const DEM_RASTER: ServiceSpec = ServiceSpec {
+    name: "grains/dem/raster",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+};
+/// MPM → coupler: phase-1 momentum and mass on grid nodes.
+pub const MPM_RASTER: ServiceSpec = ServiceSpec {
+    name: "grains/mpm/raster",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+};
+/// Coupler → DEM and MPM: constrained node velocities.
+pub const VELOCITIES: ServiceSpec = ServiceSpec {
+    name: "grains/coupler/velocities",
+    max_publishers: 1,
+    max_subscribers: 2,
+    buffer: 2,
+};
+/// Oracle → solvers: zone of every grid cell that changed.
+pub const ZONES: ServiceSpec = ServiceSpec {
+    name: "grains/oracle/zones",
+    max_publishers: 1,
+    max_subscribers: 2,
+    buffer: 2,
+};
+/// Oracle → DEM: grains to create.
+pub const SPAWN_GRAINS: ServiceSpec = ServiceSpec {
+    name: "grains/oracle/spawn_grains",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+};
+/// Oracle → MPM: material points to create.
+pub const SPAWN_POINTS: ServiceSpec = ServiceSpec {
+    name: "grains/oracle/spawn_points",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+};
+/// Oracle → DEM: ids of grains to delete.
+pub const DELETE_GRAINS: ServiceSpec = ServiceSpec {
+    name: "grains/oracle/delete_grains",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+};
+/// Oracle → MPM: ids of material points to delete.
+pub const DELETE_POINTS: ServiceSpec = ServiceSpec {
+    name: "grains/oracle/delete_points",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+};
+
+/// A service and its quality of service. Every participant opens a service with exactly
+/// these limits (iceoryx2 refuses an opener whose limits exceed the creator's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ServiceSpec {
+    pub name: &'static str,
+    pub max_publishers: usize,
+    pub max_subscribers: usize,
+    /// Messages a subscriber may have queued per publisher before the publisher waits.
+    pub buffer: usize,
+}
+
+/// Every service of a run, for the spec and for cleanup.
+pub const ALL: [ServiceSpec; 13] = [
+    HELLO,
+    WELCOME,
+    CONTROL,
+    SUMMARY,
+    STEP_BEGIN,
+    DEM_RASTER,
+    MPM_RASTER,
+    VELOCITIES,
+    ZONES,
+    SPAWN_GRAINS,
+    SPAWN_POINTS,
+    DELETE_GRAINS,
+    DELETE_POINTS,
+];
+
+/// Node name of a participant in the iceoryx2 node list (`grains-dem`, …): what a survivor
+/// reports when it finds a dead node.
+pub fn node_name(role: crate::Role) -> &'static str {
+    role.binary()
+}

@@ -1,0 +1,1092 @@
+//! Scene schema v1: TOML in, a validated [`Scene`] out.
+//!
+//! Two levels (ripgrep's low-level/high-level args): [`raw`] mirrors the file with serde
+//! (`deny_unknown_fields`, spans kept for every value that has a range), [`load`] checks
+//! types, ranges and cross-references and derives what the run needs (its participants, its
+//! time owner). Every error names the file, the line and column, the field and what is
+//! allowed; see [`SceneError`]. The format is documented field by field in `scenes/README.md`.
+
+use crate::Role;
+use serde::Deserialize;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// The only schema version this build reads.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// A scene file that cannot be used, with where and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneError {
+    pub path: PathBuf,
+    /// 1-based line and column, when the problem has a place in the file.
+    pub line_col: Option<(usize, usize)>,
+    /// Dotted field path (`domain.cell_size`), when known.
+    pub field: Option<String>,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl std::fmt::Display for SceneError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some((line, col)) = self.line_col {
+            write!(f, ":{line}:{col}")?;
+        }
+        if let Some(field) = &self.field {
+            write!(f, ": field `{field}`")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// Spatial dimension of a scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dimension {
+    Two = 2,
+    Three = 3,
+}
+
+/// How a body of material is modelled at the start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Model {
+    Dem,
+    Mpm,
+    Hybrid,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Domain {
+    /// Lower corner [m]; the third component is 0 in 2D.
+    pub min: [f64; 3],
+    /// Upper corner [m].
+    pub max: [f64; 3],
+    /// Background grid cell width [m] (MPM grid, rasters, oracle).
+    pub cell_size: f64,
+}
+
+/// Grain parameters (Yue 2018 §3.2, Chen 2021 §2.1 and Table 1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DemMaterial {
+    /// Mean grain radius [m].
+    pub radius: f64,
+    /// Standard deviation of the radius [m] (normal distribution, clamped to ±2σ).
+    pub radius_std: f64,
+    /// Normal stiffness k_n [N/m].
+    pub stiffness_normal: f64,
+    /// Tangential stiffness k_t [N/m].
+    pub stiffness_tangential: f64,
+    /// Normal restitution coefficient e, in (0, 1].
+    pub restitution: f64,
+    /// Coulomb friction coefficient μ.
+    pub friction: f64,
+    /// Normal cohesion e_n [N/m] (Chen 2021).
+    pub cohesion_normal: f64,
+    /// Tangential cohesion e_t [N/m].
+    pub cohesion_tangential: f64,
+}
+
+/// Continuum parameters (Yue 2018 §3.3–3.4, Chen 2021 §2.2).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MpmMaterial {
+    /// Young's modulus [Pa].
+    pub young: f64,
+    /// Poisson's ratio, in [0, 0.5).
+    pub poisson: f64,
+    /// Friction angle [degrees].
+    pub friction_angle: f64,
+    /// Cohesion [Pa].
+    pub cohesion: f64,
+    /// Dilation angle [degrees].
+    pub dilation_angle: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Density of the grain material [kg/m³].
+    pub density: f64,
+    pub dem: Option<DemMaterial>,
+    pub mpm: Option<MpmMaterial>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Shape {
+    Box {
+        min: [f64; 3],
+        max: [f64; 3],
+    },
+    /// A disk in 2D, a sphere in 3D.
+    Ball {
+        center: [f64; 3],
+        radius: f64,
+    },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Body {
+    /// Index into [`Scene::materials`].
+    pub material: usize,
+    pub model: Model,
+    pub shape: Shape,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum WallShape {
+    /// Half-space boundary through `point` with inward `normal` (unit).
+    Plane { point: [f64; 3], normal: [f64; 3] },
+    /// Material kept inside the box.
+    Box { min: [f64; 3], max: [f64; 3] },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Wall {
+    pub shape: WallShape,
+    /// Coulomb friction between material and wall.
+    pub friction: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Coupling {
+    /// DEM substeps per macro-step k (Yue 2018 Alg. 2).
+    pub substeps: u32,
+    /// MPM share w of the mass in the hybrid zone (DEM takes 1 − w).
+    pub weight: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OracleKind {
+    /// Zones given by the scene, never changed.
+    Fixed,
+    /// Discrete layer of set thickness at the free surface (Yue 2018 §4.3).
+    Layered,
+    /// Zones from the packing-fraction isocontour (Yue 2018 §4).
+    Surface,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Oracle {
+    pub kind: OracleKind,
+    /// Macro-steps between oracle epochs.
+    pub every: u64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    /// Macro-steps between VTU frames; 0 writes none.
+    pub frames_every: u64,
+}
+
+/// A test scene whose solvers publish synthetic rasters instead of physics (issue 2): it
+/// proves the runtime with real payloads and real checks. Never part of a physics scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Synthetic {
+    pub participants: Vec<Role>,
+    /// Nodes in the DEM raster before variation.
+    pub dem_nodes: u64,
+    /// Nodes in the MPM raster before variation.
+    pub mpm_nodes: u64,
+    /// Share of the smaller raster's nodes that both rasters contain, in [0, 1].
+    pub overlap: f64,
+    /// Raster lengths shrink by up to this share, differently every step, in [0, 0.9].
+    pub vary: f64,
+    /// Compute and verify payload checksums.
+    pub checksum: bool,
+    /// How node values are made: hashed (every bit depends on seed, step and node; the
+    /// default) or plain (cheap arithmetic, for benchmarks that time the exchange itself).
+    pub content: SyntheticContent,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SyntheticContent {
+    Hashed,
+    Plain,
+}
+
+/// A validated scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    pub path: PathBuf,
+    /// Hash of the file bytes: every participant of a run must have loaded the same scene.
+    pub hash: u64,
+    pub name: String,
+    pub dimension: Dimension,
+    /// Macro-step [s].
+    pub dt: f64,
+    pub steps: u64,
+    pub seed: u64,
+    /// Worker threads per solver process.
+    pub threads: u32,
+    pub domain: Domain,
+    /// [m/s²]; the third component is 0 in 2D.
+    pub gravity: [f64; 3],
+    pub materials: Vec<Material>,
+    pub bodies: Vec<Body>,
+    pub walls: Vec<Wall>,
+    pub coupling: Coupling,
+    pub oracle: Option<Oracle>,
+    pub output: Output,
+    pub synthetic: Option<Synthetic>,
+}
+
+impl Scene {
+    /// The participants this scene needs, in start order; nothing it does not need
+    /// (a DEM-only scene starts no MPM, no coupler, no oracle).
+    pub fn participants(&self) -> Vec<Role> {
+        if let Some(s) = &self.synthetic {
+            return s.participants.clone();
+        }
+        let has = |m: Model| self.bodies.iter().any(|b| b.model == m);
+        let dem = has(Model::Dem) || has(Model::Hybrid);
+        let mpm = has(Model::Mpm) || has(Model::Hybrid);
+        let mut out = Vec::new();
+        if dem {
+            out.push(Role::Dem);
+        }
+        if mpm {
+            out.push(Role::Mpm);
+        }
+        if dem && mpm {
+            out.push(Role::Coupler);
+        }
+        if self.oracle.is_some() && dem && mpm {
+            out.push(Role::Oracle);
+        }
+        out
+    }
+
+    /// The participant that owns time: the coupler when there is one, else the only solver.
+    pub fn time_owner(&self) -> Role {
+        let parts = self.participants();
+        if parts.contains(&Role::Coupler) { Role::Coupler } else { parts[0] }
+    }
+
+    /// Number of components that matter in vectors (2 or 3).
+    pub fn dim(&self) -> usize {
+        self.dimension as usize
+    }
+}
+
+/// FNV-1a of the file bytes.
+pub fn hash_bytes(bytes: &[u8]) -> u64 {
+    bytes
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+/// Reads and validates a scene file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let plain = |message: String| SceneError {
+        path: path.to_path_buf(),
+        line_col: None,
+        field: None,
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|e| plain(format!("cannot read the scene file: {e}")))?;
+    let text = match std::str::from_utf8(&bytes) {
+        Ok(t) => t,
+        Err(e) => {
+            return Err(plain(format!(
+                "not a text file: invalid UTF-8 at byte {} (a scene is a TOML text file)",
+                e.valid_up_to()
+            )));
+        }
+    };
+    from_str(text, path, hash_bytes(&bytes))
+}
+
+/// Validates scene text; `path` is only used in messages.
+pub fn from_str(text: &str, path: &Path, hash: u64) -> Result<Scene, SceneError> {
+    let ctx = Ctx { text, path };
+    if text.trim().is_empty() {
+        return Err(ctx.err(
+            None,
+            None,
+            format!("the file is empty; a scene needs at least `schema = {SCHEMA_VERSION}`, [run] and [domain] (see scenes/README.md)"),
+        ));
+    }
+    let raw: raw::RawScene = toml::from_str(text).map_err(|e| ctx.from_toml(&e))?;
+    validate(&ctx, raw, hash)
+}
+
+struct Ctx<'a> {
+    text: &'a str,
+    path: &'a Path,
+}
+
+impl Ctx<'_> {
+    fn line_col(&self, offset: usize) -> (usize, usize) {
+        let before = &self.text[..offset.min(self.text.len())];
+        let line = before.matches('\n').count() + 1;
+        let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+        (line, col)
+    }
+
+    fn err(&self, span: Option<Range<usize>>, field: Option<&str>, message: String) -> SceneError {
+        SceneError {
+            path: self.path.to_path_buf(),
+            line_col: span.map(|s| self.line_col(s.start)),
+            field: field.map(str::to_string),
+            message,
+        }
+    }
+
+    /// A serde/TOML error: keep its message, add the key written on the offending line.
+    fn from_toml(&self, e: &toml::de::Error) -> SceneError {
+        let span = e.span();
+        let field = span.clone().and_then(|s| self.key_on_line_of(s.start));
+        let message = e.message().trim().replace('\n', " ");
+        SceneError {
+            path: self.path.to_path_buf(),
+            line_col: span.map(|s| self.line_col(s.start)),
+            field,
+            message,
+        }
+    }
+
+    fn key_on_line_of(&self, offset: usize) -> Option<String> {
+        let start = self.text[..offset.min(self.text.len())].rfind('\n').map_or(0, |i| i + 1);
+        let line = self.text[start..].lines().next()?;
+        let (key, _) = line.split_once('=')?;
+        let key = key.trim();
+        let ok = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-');
+        ok.then(|| key.to_string())
+    }
+}
+
+fn vec3(ctx: &Ctx, dim: usize, v: &Spanned<Vec<f64>>, field: &str) -> Result<[f64; 3], SceneError> {
+    if v.get_ref().len() != dim {
+        return Err(ctx.err(
+            Some(v.span()),
+            Some(field),
+            format!("expected {dim} components for a {dim}D scene, got {}", v.get_ref().len()),
+        ));
+    }
+    if let Some(x) = v.get_ref().iter().find(|x| !x.is_finite()) {
+        return Err(ctx.err(Some(v.span()), Some(field), format!("components must be finite, got {x}")));
+    }
+    let mut out = [0.0; 3];
+    out[..dim].copy_from_slice(v.get_ref());
+    Ok(out)
+}
+
+/// Checks `lo < x < hi` (open or closed ends as given) and finiteness.
+fn in_range(ctx: &Ctx, v: &Spanned<f64>, field: &str, lo: Bound, hi: Bound) -> Result<f64, SceneError> {
+    let x = *v.get_ref();
+    let ok = x.is_finite() && lo.below(x) && hi.above(x);
+    if ok {
+        Ok(x)
+    } else {
+        Err(ctx.err(
+            Some(v.span()),
+            Some(field),
+            format!("must be {}{}, got {x}", lo.describe_lo(), hi.describe_hi()),
+        ))
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Bound {
+    Open(f64),
+    Closed(f64),
+    None,
+}
+
+impl Bound {
+    fn below(self, x: f64) -> bool {
+        match self {
+            Bound::Open(b) => x > b,
+            Bound::Closed(b) => x >= b,
+            Bound::None => true,
+        }
+    }
+    fn above(self, x: f64) -> bool {
+        match self {
+            Bound::Open(b) => x < b,
+            Bound::Closed(b) => x <= b,
+            Bound::None => true,
+        }
+    }
+    fn describe_lo(self) -> String {
+        match self {
+            Bound::Open(b) => format!("> {b}"),
+            Bound::Closed(b) => format!(">= {b}"),
+            Bound::None => "finite".into(),
+        }
+    }
+    fn describe_hi(self) -> String {
+        match self {
+            Bound::Open(b) => format!(" and < {b}"),
+            Bound::Closed(b) => format!(" and <= {b}"),
+            Bound::None => String::new(),
+        }
+    }
+}
+
+use Bound::{Closed, Open};
+
+fn positive(ctx: &Ctx, v: &Spanned<f64>, field: &str) -> Result<f64, SceneError> {
+    in_range(ctx, v, field, Open(0.0), Bound::None)
+}
+
+fn non_negative(ctx: &Ctx, v: &Option<Spanned<f64>>, field: &str) -> Result<f64, SceneError> {
+    v.as_ref().map_or(Ok(0.0), |v| in_range(ctx, v, field, Closed(0.0), Bound::None))
+}
+
+fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneError> {
+    if *raw.schema.get_ref() != SCHEMA_VERSION {
+        return Err(ctx.err(
+            Some(raw.schema.span()),
+            Some("schema"),
+            format!(
+                "this build reads scene schema {SCHEMA_VERSION}, the file says {}",
+                raw.schema.get_ref()
+            ),
+        ));
+    }
+    let run = &raw.run;
+    let dimension = match *run.dimension.get_ref() {
+        2 => Dimension::Two,
+        3 => Dimension::Three,
+        d => {
+            return Err(ctx.err(
+                Some(run.dimension.span()),
+                Some("run.dimension"),
+                format!("must be 2 or 3, got {d}"),
+            ));
+        }
+    };
+    let dim = dimension as usize;
+    let dt = positive(ctx, &run.dt, "run.dt")?;
+    let steps = match (&run.steps, &run.duration) {
+        (Some(s), None) if *s.get_ref() >= 1 => *s.get_ref(),
+        (Some(s), None) => return Err(ctx.err(Some(s.span()), Some("run.steps"), "must be >= 1, got 0".into())),
+        (None, Some(d)) => {
+            let d = positive(ctx, d, "run.duration")?;
+            (d / dt).round().max(1.0) as u64
+        }
+        (Some(s), Some(_)) => {
+            return Err(ctx.err(
+                Some(s.span()),
+                Some("run.steps"),
+                "give either `run.steps` or `run.duration`, not both".into(),
+            ));
+        }
+        (None, None) => {
+            return Err(ctx.err(
+                Some(run.dt.span()),
+                Some("run"),
+                "missing `steps` or `duration`: one of them sets the length of the run".into(),
+            ));
+        }
+    };
+    let threads = match &run.threads {
+        None => 1,
+        Some(t) if (1..=256).contains(t.get_ref()) => *t.get_ref(),
+        Some(t) => {
+            return Err(ctx.err(
+                Some(t.span()),
+                Some("run.threads"),
+                format!("must be between 1 and 256, got {}", t.get_ref()),
+            ));
+        }
+    };
+
+    let d = &raw.domain;
+    let min = vec3(ctx, dim, &d.min, "domain.min")?;
+    let max = vec3(ctx, dim, &d.max, "domain.max")?;
+    if (0..dim).any(|k| max[k] <= min[k]) {
+        return Err(ctx.err(
+            Some(d.max.span()),
+            Some("domain.max"),
+            format!(
+                "must be greater than `domain.min` in every component ({:?} vs {:?})",
+                &max[..dim],
+                &min[..dim]
+            ),
+        ));
+    }
+    let cell_size = positive(ctx, &d.cell_size, "domain.cell_size")?;
+    let domain = Domain { min, max, cell_size };
+    let gravity = match &raw.gravity {
+        Some(g) => vec3(ctx, dim, g, "gravity")?,
+        None => [0.0; 3],
+    };
+
+    let mut materials = Vec::new();
+    for (i, m) in raw.material.iter().enumerate() {
+        let f = |name: &str| format!("material[{i}].{name}");
+        let name = m.name.get_ref().clone();
+        if materials.iter().any(|x: &Material| x.name == name) {
+            return Err(ctx.err(Some(m.name.span()), Some(&f("name")), format!("material `{name}` is defined twice")));
+        }
+        let dem = match &m.dem {
+            None => None,
+            Some(g) => {
+                let f = |name: &str| format!("material[{i}].dem.{name}");
+                let stiffness_normal = positive(ctx, &g.stiffness_normal, &f("stiffness_normal"))?;
+                Some(DemMaterial {
+                    radius: positive(ctx, &g.radius, &f("radius"))?,
+                    radius_std: non_negative(ctx, &g.radius_std, &f("radius_std"))?,
+                    stiffness_normal,
+                    stiffness_tangential: match &g.stiffness_tangential {
+                        Some(k) => positive(ctx, k, &f("stiffness_tangential"))?,
+                        None => stiffness_normal * 2.0 / 7.0,
+                    },
+                    restitution: in_range(ctx, &g.restitution, &f("restitution"), Open(0.0), Closed(1.0))?,
+                    friction: in_range(ctx, &g.friction, &f("friction"), Closed(0.0), Bound::None)?,
+                    cohesion_normal: non_negative(ctx, &g.cohesion_normal, &f("cohesion_normal"))?,
+                    cohesion_tangential: non_negative(ctx, &g.cohesion_tangential, &f("cohesion_tangential"))?,
+                })
+            }
+        };
+        let mpm = match &m.mpm {
+            None => None,
+            Some(c) => {
+                let f = |name: &str| format!("material[{i}].mpm.{name}");
+                Some(MpmMaterial {
+                    young: positive(ctx, &c.young, &f("young"))?,
+                    poisson: in_range(ctx, &c.poisson, &f("poisson"), Closed(0.0), Open(0.5))?,
+                    friction_angle: in_range(ctx, &c.friction_angle, &f("friction_angle"), Closed(0.0), Open(90.0))?,
+                    cohesion: non_negative(ctx, &c.cohesion, &f("cohesion"))?,
+                    dilation_angle: match &c.dilation_angle {
+                        Some(a) => in_range(ctx, a, &f("dilation_angle"), Closed(0.0), Open(90.0))?,
+                        None => 0.0,
+                    },
+                })
+            }
+        };
+        materials.push(Material {
+            name,
+            density: positive(ctx, &m.density, &f("density"))?,
+            dem,
+            mpm,
+        });
+    }
+
+    let mut bodies = Vec::new();
+    for (i, b) in raw.body.iter().enumerate() {
+        let f = |name: &str| format!("body[{i}].{name}");
+        let Some(material) = materials.iter().position(|m| &m.name == b.material.get_ref()) else {
+            let known: Vec<_> = materials.iter().map(|m| format!("`{}`", m.name)).collect();
+            return Err(ctx.err(
+                Some(b.material.span()),
+                Some(&f("material")),
+                format!(
+                    "no material named `{}`; defined: {}",
+                    b.material.get_ref(),
+                    if known.is_empty() { "none".into() } else { known.join(", ") }
+                ),
+            ));
+        };
+        let model = match b.model.get_ref().as_str() {
+            "dem" => Model::Dem,
+            "mpm" => Model::Mpm,
+            "hybrid" => Model::Hybrid,
+            other => {
+                return Err(ctx.err(
+                    Some(b.model.span()),
+                    Some(&f("model")),
+                    format!("must be one of \"dem\", \"mpm\", \"hybrid\", got {other:?}"),
+                ));
+            }
+        };
+        let mat = &materials[material];
+        let needs_dem = matches!(model, Model::Dem | Model::Hybrid);
+        let needs_mpm = matches!(model, Model::Mpm | Model::Hybrid);
+        if (needs_dem && mat.dem.is_none()) || (needs_mpm && mat.mpm.is_none()) {
+            return Err(ctx.err(
+                Some(b.model.span()),
+                Some(&f("model")),
+                format!(
+                    "model {:?} needs material `{}` to have {}",
+                    b.model.get_ref(),
+                    mat.name,
+                    if needs_dem && mat.dem.is_none() {
+                        "a [material.dem] table"
+                    } else {
+                        "a [material.mpm] table"
+                    }
+                ),
+            ));
+        }
+        let shape = shape(ctx, dim, &b.shape, &b.min, &b.max, &b.center, &b.radius, &f)?;
+        bodies.push(Body { material, model, shape });
+    }
+
+    let mut walls = Vec::new();
+    for (i, w) in raw.wall.iter().enumerate() {
+        let f = |name: &str| format!("wall[{i}].{name}");
+        let missing = |name: &str| {
+            ctx.err(
+                Some(w.kind.span()),
+                Some(&f(name)),
+                format!("a {:?} wall needs `{name}`", w.kind.get_ref()),
+            )
+        };
+        let shape = match w.kind.get_ref().as_str() {
+            "plane" => {
+                let point = vec3(ctx, dim, w.point.as_ref().ok_or_else(|| missing("point"))?, &f("point"))?;
+                let n = w.normal.as_ref().ok_or_else(|| missing("normal"))?;
+                let mut normal = vec3(ctx, dim, n, &f("normal"))?;
+                let len = normal.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if len == 0.0 {
+                    return Err(ctx.err(Some(n.span()), Some(&f("normal")), "must not be the zero vector".into()));
+                }
+                normal.iter_mut().for_each(|x| *x /= len);
+                WallShape::Plane { point, normal }
+            }
+            "box" => {
+                let (min, max) = box_corners(
+                    ctx,
+                    dim,
+                    w.min.as_ref().ok_or_else(|| missing("min"))?,
+                    w.max.as_ref().ok_or_else(|| missing("max"))?,
+                    &f,
+                )?;
+                WallShape::Box { min, max }
+            }
+            other => {
+                return Err(ctx.err(
+                    Some(w.kind.span()),
+                    Some(&f("kind")),
+                    format!("must be \"plane\" or \"box\", got {other:?}"),
+                ));
+            }
+        };
+        walls.push(Wall {
+            shape,
+            friction: non_negative(ctx, &w.friction, &f("friction"))?,
+        });
+    }
+
+    let coupling = match &raw.coupling {
+        None => Coupling { substeps: 10, weight: 0.5 },
+        Some(c) => Coupling {
+            substeps: match &c.substeps {
+                None => 10,
+                Some(k) if (1..=10_000).contains(k.get_ref()) => *k.get_ref(),
+                Some(k) => {
+                    return Err(ctx.err(
+                        Some(k.span()),
+                        Some("coupling.substeps"),
+                        format!("must be between 1 and 10000, got {}", k.get_ref()),
+                    ));
+                }
+            },
+            weight: match &c.weight {
+                None => 0.5,
+                Some(w) => in_range(ctx, w, "coupling.weight", Open(0.0), Open(1.0))?,
+            },
+        },
+    };
+    let oracle = match &raw.oracle {
+        None => None,
+        Some(o) => Some(Oracle {
+            kind: match o.kind.get_ref().as_str() {
+                "fixed" => OracleKind::Fixed,
+                "layered" => OracleKind::Layered,
+                "surface" => OracleKind::Surface,
+                other => {
+                    return Err(ctx.err(
+                        Some(o.kind.span()),
+                        Some("oracle.kind"),
+                        format!("must be one of \"fixed\", \"layered\", \"surface\", got {other:?}"),
+                    ));
+                }
+            },
+            every: match &o.every {
+                None => 100,
+                Some(e) if *e.get_ref() >= 1 => *e.get_ref(),
+                Some(e) => return Err(ctx.err(Some(e.span()), Some("oracle.every"), "must be >= 1, got 0".into())),
+            },
+        }),
+    };
+    let output = Output {
+        frames_every: raw.output.as_ref().and_then(|o| o.frames_every).unwrap_or(0),
+    };
+
+    let synthetic = match &raw.synthetic {
+        None => None,
+        Some(s) => {
+            let mut participants = Vec::new();
+            match &s.participants {
+                None => participants.extend([Role::Dem, Role::Mpm, Role::Coupler]),
+                Some(list) => {
+                    for p in list.get_ref() {
+                        match Role::from_name(p).filter(|r| Role::PARTICIPANTS[..3].contains(r)) {
+                            Some(r) if !participants.contains(&r) => participants.push(r),
+                            _ => {
+                                return Err(ctx.err(
+                                    Some(list.span()),
+                                    Some("synthetic.participants"),
+                                    format!("entries must be distinct and one of \"dem\", \"mpm\", \"coupler\", got {p:?}"),
+                                ));
+                            }
+                        }
+                    }
+                    participants.sort();
+                }
+            }
+            let solvers = participants.iter().filter(|r| matches!(r, Role::Dem | Role::Mpm)).count();
+            let coupled = participants.contains(&Role::Coupler);
+            if (coupled && solvers != 2) || (!coupled && solvers != 1) {
+                let span = s.participants.as_ref().map(|l| l.span());
+                return Err(ctx.err(
+                    span,
+                    Some("synthetic.participants"),
+                    "allowed sets: [\"dem\"], [\"mpm\"], or [\"dem\", \"mpm\", \"coupler\"]".into(),
+                ));
+            }
+            let nodes = |v: &Option<Spanned<u64>>, field: &str| match v {
+                None => Ok(1000),
+                Some(n) if (1..=100_000_000).contains(n.get_ref()) => Ok(*n.get_ref()),
+                Some(n) => Err(ctx.err(
+                    Some(n.span()),
+                    Some(field),
+                    format!("must be between 1 and 100000000, got {}", n.get_ref()),
+                )),
+            };
+            Some(Synthetic {
+                participants,
+                dem_nodes: nodes(&s.dem_nodes, "synthetic.dem_nodes")?,
+                mpm_nodes: nodes(&s.mpm_nodes, "synthetic.mpm_nodes")?,
+                overlap: match &s.overlap {
+                    None => 0.5,
+                    Some(o) => in_range(ctx, o, "synthetic.overlap", Closed(0.0), Closed(1.0))?,
+                },
+                vary: match &s.vary {
+                    None => 0.0,
+                    Some(v) => in_range(ctx, v, "synthetic.vary", Closed(0.0), Closed(0.9))?,
+                },
+                checksum: s.checksum.unwrap_or(true),
+                content: match s.content.as_ref().map(|c| c.get_ref().as_str()) {
+                    None | Some("hashed") => SyntheticContent::Hashed,
+                    Some("plain") => SyntheticContent::Plain,
+                    Some(other) => {
+                        let span = s.content.as_ref().map(|c| c.span());
+                        return Err(ctx.err(
+                            span,
+                            Some("synthetic.content"),
+                            format!("must be \"hashed\" or \"plain\", got {other:?}"),
+                        ));
+                    }
+                },
+            })
+        }
+    };
+    if synthetic.is_none() && bodies.is_empty() {
+        return Err(ctx.err(
+            None,
+            Some("body"),
+            "the scene has no [[body]] of material (and is not a [synthetic] test scene): nothing to simulate".into(),
+        ));
+    }
+    if synthetic.is_some() && !bodies.is_empty() {
+        return Err(ctx.err(
+            None,
+            Some("synthetic"),
+            "a [synthetic] test scene cannot also have [[body]] tables: synthetic rasters never mix with physics".into(),
+        ));
+    }
+
+    let name = match &run.name {
+        Some(n) if !n.is_empty() && n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') => n.clone(),
+        Some(n) => {
+            return Err(ctx.err(
+                None,
+                Some("run.name"),
+                format!("must be non-empty and use only letters, digits, '_' and '-' (it names the output directory), got {n:?}"),
+            ));
+        }
+        None => ctx
+            .path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into()),
+    };
+    Ok(Scene {
+        path: ctx.path.to_path_buf(),
+        hash,
+        name,
+        dimension,
+        dt,
+        steps,
+        seed: run.seed.unwrap_or(0),
+        threads,
+        domain,
+        gravity,
+        materials,
+        bodies,
+        walls,
+        coupling,
+        oracle,
+        output,
+        synthetic,
+    })
+}
+
+fn box_corners(
+    ctx: &Ctx,
+    dim: usize,
+    min: &Spanned<Vec<f64>>,
+    max: &Spanned<Vec<f64>>,
+    f: &dyn Fn(&str) -> String,
+) -> Result<([f64; 3], [f64; 3]), SceneError> {
+    let lo = vec3(ctx, dim, min, &f("min"))?;
+    let hi = vec3(ctx, dim, max, &f("max"))?;
+    if (0..dim).any(|k| hi[k] <= lo[k]) {
+        return Err(ctx.err(
+            Some(max.span()),
+            Some(&f("max")),
+            "must be greater than `min` in every component".into(),
+        ));
+    }
+    Ok((lo, hi))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn shape(
+    ctx: &Ctx,
+    dim: usize,
+    kind: &Spanned<String>,
+    min: &Option<Spanned<Vec<f64>>>,
+    max: &Option<Spanned<Vec<f64>>>,
+    center: &Option<Spanned<Vec<f64>>>,
+    radius: &Option<Spanned<f64>>,
+    f: &dyn Fn(&str) -> String,
+) -> Result<Shape, SceneError> {
+    let missing = |name: &str| {
+        ctx.err(
+            Some(kind.span()),
+            Some(&f(name)),
+            format!("a {:?} body needs `{name}`", kind.get_ref()),
+        )
+    };
+    match kind.get_ref().as_str() {
+        "box" => {
+            let (min, max) = box_corners(
+                ctx,
+                dim,
+                min.as_ref().ok_or_else(|| missing("min"))?,
+                max.as_ref().ok_or_else(|| missing("max"))?,
+                f,
+            )?;
+            Ok(Shape::Box { min, max })
+        }
+        "ball" => Ok(Shape::Ball {
+            center: vec3(ctx, dim, center.as_ref().ok_or_else(|| missing("center"))?, &f("center"))?,
+            radius: positive(ctx, radius.as_ref().ok_or_else(|| missing("radius"))?, &f("radius"))?,
+        }),
+        other => Err(ctx.err(
+            Some(kind.span()),
+            Some(&f("shape")),
+            format!("must be \"box\" or \"ball\" (disk in 2D, sphere in 3D), got {other:?}"),
+        )),
+    }
+}
+
+/// The file as written: serde structs, unknown fields refused, spans kept.
+pub mod raw {
+    use super::*;
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawScene {
+        pub schema: Spanned<u32>,
+        pub gravity: Option<Spanned<Vec<f64>>>,
+        pub run: RawRun,
+        pub domain: RawDomain,
+        #[serde(default)]
+        pub material: Vec<RawMaterial>,
+        #[serde(default)]
+        pub body: Vec<RawBody>,
+        #[serde(default)]
+        pub wall: Vec<RawWall>,
+        pub coupling: Option<RawCoupling>,
+        pub oracle: Option<RawOracle>,
+        pub output: Option<RawOutput>,
+        pub synthetic: Option<RawSynthetic>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawRun {
+        pub name: Option<String>,
+        pub dimension: Spanned<u32>,
+        pub dt: Spanned<f64>,
+        pub steps: Option<Spanned<u64>>,
+        pub duration: Option<Spanned<f64>>,
+        pub seed: Option<u64>,
+        pub threads: Option<Spanned<u32>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawDomain {
+        pub min: Spanned<Vec<f64>>,
+        pub max: Spanned<Vec<f64>>,
+        pub cell_size: Spanned<f64>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawMaterial {
+        pub name: Spanned<String>,
+        pub density: Spanned<f64>,
+        pub dem: Option<RawDemMaterial>,
+        pub mpm: Option<RawMpmMaterial>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawDemMaterial {
+        pub radius: Spanned<f64>,
+        pub radius_std: Option<Spanned<f64>>,
+        pub stiffness_normal: Spanned<f64>,
+        pub stiffness_tangential: Option<Spanned<f64>>,
+        pub restitution: Spanned<f64>,
+        pub friction: Spanned<f64>,
+        pub cohesion_normal: Option<Spanned<f64>>,
+        pub cohesion_tangential: Option<Spanned<f64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawMpmMaterial {
+        pub young: Spanned<f64>,
+        pub poisson: Spanned<f64>,
+        pub friction_angle: Spanned<f64>,
+        pub cohesion: Option<Spanned<f64>>,
+        pub dilation_angle: Option<Spanned<f64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawBody {
+        pub material: Spanned<String>,
+        pub model: Spanned<String>,
+        pub shape: Spanned<String>,
+        pub min: Option<Spanned<Vec<f64>>>,
+        pub max: Option<Spanned<Vec<f64>>>,
+        pub center: Option<Spanned<Vec<f64>>>,
+        pub radius: Option<Spanned<f64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawWall {
+        pub kind: Spanned<String>,
+        pub point: Option<Spanned<Vec<f64>>>,
+        pub normal: Option<Spanned<Vec<f64>>>,
+        pub min: Option<Spanned<Vec<f64>>>,
+        pub max: Option<Spanned<Vec<f64>>>,
+        pub friction: Option<Spanned<f64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawCoupling {
+        pub substeps: Option<Spanned<u32>>,
+        pub weight: Option<Spanned<f64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawOracle {
+        pub kind: Spanned<String>,
+        pub every: Option<Spanned<u64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawOutput {
+        pub frames_every: Option<u64>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawSynthetic {
+        pub participants: Option<Spanned<Vec<String>>>,
+        pub dem_nodes: Option<Spanned<u64>>,
+        pub mpm_nodes: Option<Spanned<u64>>,
+        pub overlap: Option<Spanned<f64>>,
+        pub vary: Option<Spanned<f64>>,
+        pub checksum: Option<bool>,
+        pub content: Option<Spanned<String>>,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+schema = 1
+[run]
+dimension = 2
+dt = 1e-4
+steps = 10
+[domain]
+min = [0.0, 0.0]
+max = [1.0, 1.0]
+cell_size = 0.01
+[synthetic]
+dem_nodes = 100
+mpm_nodes = 50
+"#;
+
+    fn check_err(text: &str, line: Option<usize>, field: &str, needle: &str) {
+        let err = from_str(text, Path::new("s.toml"), 0).expect_err("must be refused");
+        assert_eq!(err.line_col.map(|l| l.0), line, "{err}");
+        assert_eq!(err.field.as_deref(), Some(field), "{err}");
+        assert!(err.message.contains(needle), "{err}");
+    }
+
+    #[test]
+    fn a_good_synthetic_scene_validates() {
+        let s = from_str(GOOD, Path::new("dir/good.toml"), 7).unwrap();
+        assert_eq!(s.name, "good");
+        assert_eq!(s.participants(), vec![Role::Dem, Role::Mpm, Role::Coupler]);
+        assert_eq!(s.time_owner(), Role::Coupler);
+        assert_eq!(s.steps, 10);
+    }
+
+    #[test]
+    fn errors_name_line_field_and_allowed_values() {
+        check_err(
+            &GOOD.replace("cell_size = 0.01", "cell_size = -0.01"),
+            Some(10),
+            "domain.cell_size",
+            "> 0",
+        );
+        check_err(
+            &GOOD.replace("steps = 10", "steps = 10\nbogus = 3"),
+            Some(7),
+            "bogus",
+            "unknown field",
+        );
+        check_err(&GOOD.replace("dt = 1e-4", "dt = \"fast\""), Some(5), "dt", "invalid type");
+        check_err(&GOOD.replace("dimension = 2", "dimension = 4"), Some(4), "run.dimension", "2 or 3");
+        check_err(
+            &GOOD.replace("max = [1.0, 1.0]", "max = [1.0, 1.0, 1.0]"),
+            Some(9),
+            "domain.max",
+            "2 components",
+        );
+        check_err(
+            &GOOD.replace("mpm_nodes = 50", "mpm_nodes = 50\nparticipants = [\"dem\", \"coupler\"]"),
+            Some(14),
+            "synthetic.participants",
+            "allowed sets",
+        );
+    }
+
+    #[test]
+    fn duration_gives_the_step_count() {
+        let s = from_str(&GOOD.replace("steps = 10", "duration = 0.01"), Path::new("g.toml"), 0).unwrap();
+        assert_eq!(s.steps, 100);
+    }
+}

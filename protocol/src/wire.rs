@@ -1,0 +1,270 @@
+//! Wire types: `#[repr(C)]`, fixed-size integers and floats only, little-endian, no implicit
+//! padding (explicit `_pad` fields), so that a participant in C or Python can read them.
+//! Sizes and offsets are pinned by `tests/layout.rs` and written in `protocol/README.md`.
+//!
+//! Every data service carries a slice of one element type as payload and a [`StepHeader`]
+//! as iceoryx2 user header. Only [`Hello`] and [`Welcome`] (the admission handshake) have no
+//! user header: their layout never changes, so that a participant of another protocol version
+//! can still be told why it is refused.
+
+#[cfg(feature = "zero-copy")]
+use iceoryx2::prelude::ZeroCopySend;
+
+macro_rules! wire_type {
+    ($(#[$meta:meta])* $name:literal, pub struct $ty:ident { $($(#[$fmeta:meta])* pub $field:ident : $fty:ty,)* }) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, Debug, Default, PartialEq)]
+        #[cfg_attr(feature = "zero-copy", derive(ZeroCopySend), type_name($name))]
+        #[repr(C)]
+        pub struct $ty { $($(#[$fmeta])* pub $field: $fty,)* }
+    };
+}
+
+wire_type! {
+    /// User header of every data service. 80 bytes.
+    "grains.StepHeader.v1",
+    pub struct StepHeader {
+        /// [`crate::PROTOCOL_VERSION`] of the sender.
+        pub protocol_version: u32,
+        /// [`crate::Role`] code of the sender.
+        pub sender: u32,
+        /// Macro-step this message belongs to (the first step is 1; 0 for messages sent
+        /// before the first step, such as a zone field at start).
+        pub step: u64,
+        /// Simulated time at the start of the step [s].
+        pub time: f64,
+        /// Macro-step length [s].
+        pub dt: f64,
+        /// [`crate::checksum`] of the payload bytes, or 0 when not computed.
+        pub checksum: u64,
+        /// Meaning per service (see `protocol/README.md`); 0 when unused.
+        pub flags: u64,
+        /// Run id, ASCII, zero-padded.
+        pub run_id: [u8; 32],
+    }
+}
+
+wire_type! {
+    /// Admission request, participant → launcher on [`crate::names::HELLO`]. 64 bytes.
+    "grains.Hello",
+    pub struct Hello {
+        /// [`crate::HELLO_MAGIC`].
+        pub magic: u64,
+        /// [`crate::scene::Scene::hash`] of the scene file the participant loaded.
+        pub scene_hash: u64,
+        pub protocol_version: u32,
+        /// [`crate::Role`] code.
+        pub role: u32,
+        pub pid: u32,
+        /// 0: admission request; 1 ([`HELLO_READY`]): every port connected, ready to start.
+        pub flags: u32,
+        pub run_id: [u8; 32],
+    }
+}
+
+/// [`Hello::flags`] of a participant's second hello.
+pub const HELLO_READY: u32 = 1;
+
+wire_type! {
+    /// Admission answer, launcher → participants on [`crate::names::WELCOME`]; a participant
+    /// reads only the answer with its own `role` and `pid`. 64 bytes.
+    "grains.Welcome",
+    pub struct Welcome {
+        pub magic: u64,
+        /// The run's scene hash.
+        pub scene_hash: u64,
+        /// The run's protocol version.
+        pub protocol_version: u32,
+        pub role: u32,
+        pub pid: u32,
+        /// [`Verdict`] code.
+        pub verdict: u32,
+        pub run_id: [u8; 32],
+    }
+}
+
+/// Launcher's answer to a [`Hello`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Verdict {
+    Accepted = 0,
+    WrongProtocolVersion = 1,
+    WrongScene = 2,
+    RoleNotInRun = 3,
+    RoleTaken = 4,
+    /// Broadcast (role 0, pid 0) once every participant is ready: the run starts.
+    Start = 100,
+}
+
+impl Verdict {
+    pub fn from_code(code: u32) -> Option<Verdict> {
+        use Verdict::*;
+        [Accepted, WrongProtocolVersion, WrongScene, RoleNotInRun, RoleTaken, Start]
+            .into_iter()
+            .find(|v| *v as u32 == code)
+    }
+}
+
+wire_type! {
+    /// Time owner → solvers on [`crate::names::STEP_BEGIN`], one element. 8 bytes.
+    /// Step, time and dt are in the header.
+    "grains.StepBegin.v1",
+    pub struct StepBegin {
+        /// Bit set of `STEP_*` flags.
+        pub flags: u32,
+        /// DEM substeps per macro-step (Yue 2018 Alg. 2).
+        pub substeps: u32,
+    }
+}
+
+/// [`StepBegin::flags`]: the run is over; do not step, finish and exit 0.
+pub const STEP_STOP: u32 = 1;
+
+wire_type! {
+    /// One grid node of a sparse raster (DEM or MPM → coupler). 40 bytes.
+    /// Nodes of one raster are sorted by strictly increasing `node`.
+    "grains.RasterNode.v1",
+    pub struct RasterNode {
+        /// Linear index of the grid node.
+        pub node: u64,
+        /// Weighted mass on the node [kg] (2D: kg per metre of thickness).
+        pub mass: f64,
+        /// Weighted momentum on the node [kg m/s]; the third component is 0 in 2D.
+        pub momentum: [f64; 3],
+    }
+}
+
+wire_type! {
+    /// One constrained node velocity (coupler → DEM and MPM). 32 bytes, sorted by `node`.
+    "grains.NodeVelocity.v1",
+    pub struct NodeVelocity {
+        pub node: u64,
+        /// [m/s]; the third component is 0 in 2D.
+        pub velocity: [f64; 3],
+    }
+}
+
+wire_type! {
+    /// Zone of one grid cell (oracle → solvers). 24 bytes.
+    "grains.ZoneCell.v1",
+    pub struct ZoneCell {
+        pub cell: u64,
+        /// [`Zone`] code.
+        pub zone: u32,
+        pub _pad: u32,
+        /// Signed distance to the discrete/continuum interface [m] (negative inside the
+        /// discrete side).
+        pub distance: f64,
+    }
+}
+
+/// Model of a zone (Yue 2018 §4.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Zone {
+    Continuum = 0,
+    Hybrid = 1,
+    Discrete = 2,
+}
+
+wire_type! {
+    /// A grain to create (oracle → DEM). 64 bytes.
+    "grains.SpawnGrain.v1",
+    pub struct SpawnGrain {
+        pub id: u64,
+        /// [m]
+        pub radius: f64,
+        /// [m]
+        pub position: [f64; 3],
+        /// [m/s]
+        pub velocity: [f64; 3],
+    }
+}
+
+wire_type! {
+    /// A material point to create (oracle → MPM). 120 bytes.
+    "grains.SpawnPoint.v1",
+    pub struct SpawnPoint {
+        pub id: u64,
+        /// [m³] (2D: m² per metre of thickness)
+        pub volume: f64,
+        /// [kg]
+        pub mass: f64,
+        pub position: [f64; 3],
+        pub velocity: [f64; 3],
+        /// Cauchy stress [Pa], Voigt order xx, yy, zz, yz, xz, xy.
+        pub stress: [f64; 6],
+    }
+}
+
+wire_type! {
+    /// One participant's account of one macro-step (every participant → launcher). 104 bytes.
+    "grains.Summary.v1",
+    pub struct Summary {
+        /// [`crate::Role`] code.
+        pub role: u32,
+        /// 0 = ok; otherwise a [`SummaryStatus`] code.
+        pub status: u32,
+        pub step: u64,
+        /// Simulated time at the end of the step [s].
+        pub time: f64,
+        /// Grains (DEM), material points (MPM) or zone nodes (coupler).
+        pub n_items: u64,
+        /// Raster nodes sent (DEM, MPM) or received (coupler).
+        pub n_nodes: u64,
+        /// Total mass [kg].
+        pub mass: f64,
+        /// Total linear momentum [kg m/s].
+        pub momentum: [f64; 3],
+        /// Kinetic energy [J].
+        pub kinetic_energy: f64,
+        /// Checksum of what this participant sent this step (0 if none).
+        pub checksum: u64,
+        /// Wall time spent computing this step [ns] (a timing column: varies run to run).
+        pub compute_ns: u64,
+        /// Wall time spent waiting for peers this step [ns] (timing column).
+        pub wait_ns: u64,
+    }
+}
+
+/// [`Summary::status`] codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum SummaryStatus {
+    Ok = 0,
+    /// The participant stops after this summary (a numerical failure, reported on stderr).
+    Failed = 1,
+}
+
+wire_type! {
+    /// A command to the time owner (launcher or bridge → time owner). 24 bytes.
+    "grains.Control.v1",
+    pub struct Control {
+        /// Sender's sequence number, echoed in acknowledgements.
+        pub seq: u64,
+        /// [`Command`] code.
+        pub command: u32,
+        /// Parameter key of `Set` (0 otherwise).
+        pub key: u32,
+        /// Value of `Set`.
+        pub value: f64,
+    }
+}
+
+/// [`Control::command`] codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Command {
+    Pause = 1,
+    Resume = 2,
+    Stop = 3,
+    Snapshot = 4,
+    Set = 5,
+}
+
+impl Command {
+    pub fn from_code(code: u32) -> Option<Command> {
+        use Command::*;
+        [Pause, Resume, Stop, Snapshot, Set].into_iter().find(|c| *c as u32 == code)
+    }
+}

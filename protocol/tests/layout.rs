@@ -1,0 +1,40 @@
+//! Pins the wire layouts that `protocol/README.md` promises to external participants.
+//! A change here is a protocol change: bump `PROTOCOL_VERSION` and the README with it.
+
+use grains_protocol::wire::*;
+use std::mem::{align_of, offset_of, size_of};
+
+macro_rules! check_layout {
+    ($ty:ty, size $size:expr, $( $field:ident @ $off:expr ),* $(,)?) => {{
+        assert_eq!(size_of::<$ty>(), $size, "size of {}", stringify!($ty));
+        assert_eq!(align_of::<$ty>(), 8, "alignment of {}", stringify!($ty));
+        $( assert_eq!(offset_of!($ty, $field), $off, "offset of {}::{}", stringify!($ty), stringify!($field)); )*
+    }};
+}
+
+#[test]
+fn wire_layouts_match_the_spec() {
+    check_layout!(StepHeader, size 80, protocol_version @ 0, sender @ 4, step @ 8, time @ 16,
+        dt @ 24, checksum @ 32, flags @ 40, run_id @ 48);
+    check_layout!(Hello, size 64, magic @ 0, scene_hash @ 8, protocol_version @ 16, role @ 20,
+        pid @ 24, flags @ 28, run_id @ 32);
+    check_layout!(Welcome, size 64, magic @ 0, scene_hash @ 8, protocol_version @ 16, role @ 20,
+        pid @ 24, verdict @ 28, run_id @ 32);
+    assert_eq!(size_of::<StepBegin>(), 8);
+    assert_eq!(offset_of!(StepBegin, substeps), 4);
+    check_layout!(RasterNode, size 40, node @ 0, mass @ 8, momentum @ 16);
+    check_layout!(NodeVelocity, size 32, node @ 0, velocity @ 8);
+    check_layout!(ZoneCell, size 24, cell @ 0, zone @ 8, _pad @ 12, distance @ 16);
+    check_layout!(SpawnGrain, size 64, id @ 0, radius @ 8, position @ 16, velocity @ 40);
+    check_layout!(SpawnPoint, size 120, id @ 0, volume @ 8, mass @ 16, position @ 24,
+        velocity @ 48, stress @ 72);
+    check_layout!(Summary, size 104, role @ 0, status @ 4, step @ 8, time @ 16, n_items @ 24,
+        n_nodes @ 32, mass @ 40, momentum @ 48, kinetic_energy @ 72, checksum @ 80,
+        compute_ns @ 88, wait_ns @ 96);
+    check_layout!(Control, size 24, seq @ 0, command @ 8, key @ 12, value @ 16);
+}
+
+#[test]
+fn hello_magic_reads_grains() {
+    assert_eq!(&grains_protocol::HELLO_MAGIC.to_le_bytes(), b"GRAINS\0\0");
+}

@@ -1,0 +1,266 @@
+//! iceoryx2 transport: one participant per process, one iceoryx2 node per participant.
+//!
+//! Every data service `S` is a publish–subscribe service of `[E]` with user header `H`, paired
+//! with an event service of the same name: the publisher notifies after each send, each
+//! subscriber owns a listener and blocks on it. All participants of a run share the domain
+//! prefix [`grains_protocol::names::domain_prefix`], which isolates runs and names every file
+//! the run leaves in `/dev/shm` and iceoryx2's root directory.
+
+use crate::{Pod, ServiceSpec, TransportError, ZeroCopy};
+use iceoryx2::node::NodeView;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event as ev, publish_subscribe as ps};
+use std::fmt::Debug;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+type Ipc = ipc::Service;
+
+/// A participant's handle on the run's iceoryx2 domain.
+pub struct Iceoryx2 {
+    node: Node<Ipc>,
+}
+
+fn open_err(service: &str, e: impl Debug) -> TransportError {
+    TransportError::Open {
+        service: service.into(),
+        reason: format!("{e:?}"),
+    }
+}
+
+fn io_err(service: &str, e: impl Debug) -> TransportError {
+    TransportError::Io {
+        service: service.into(),
+        reason: format!("{e:?}"),
+    }
+}
+
+/// The iceoryx2 configuration of a run: the global defaults with the run's prefix.
+pub fn run_config(run_id: &str) -> Result<Config, TransportError> {
+    let prefix = grains_protocol::names::domain_prefix(run_id);
+    let mut config = Config::global_config().clone();
+    config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| open_err("domain prefix", e))?;
+    Ok(config)
+}
+
+impl Iceoryx2 {
+    /// Joins the domain of `run_id` as the node `node_name` (`grains-dem`, …). Signal handling
+    /// stays with the caller: grains processes handle SIGINT/SIGTERM themselves.
+    pub fn join(run_id: &str, node_name: &str) -> Result<Self, TransportError> {
+        set_log_level_from_env_or(LogLevel::Error);
+        let config = run_config(run_id)?;
+        let name = NodeName::new(node_name).map_err(|e| open_err(node_name, e))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<Ipc>()
+            .map_err(|e| open_err(node_name, e))?;
+        Ok(Iceoryx2 { node })
+    }
+
+    fn service_name(spec: &ServiceSpec) -> Result<ServiceName, TransportError> {
+        ServiceName::new(spec.name).map_err(|e| open_err(spec.name, e))
+    }
+
+    fn pubsub<E: Pod + ZeroCopy, H: Pod + ZeroCopy>(&self, spec: &ServiceSpec) -> Result<ps::PortFactory<Ipc, [E], H>, TransportError> {
+        self.node
+            .service_builder(&Self::service_name(spec)?)
+            .publish_subscribe::<[E]>()
+            .user_header::<H>()
+            .max_publishers(spec.max_publishers)
+            .max_subscribers(spec.max_subscribers)
+            .subscriber_max_buffer_size(spec.buffer)
+            .subscriber_max_borrowed_samples(1)
+            .history_size(0)
+            .enable_safe_overflow(false)
+            .open_or_create()
+            .map_err(|e| open_err(spec.name, e))
+    }
+
+    fn event(&self, spec: &ServiceSpec) -> Result<ev::PortFactory<Ipc>, TransportError> {
+        self.node
+            .service_builder(&Self::service_name(spec)?)
+            .event()
+            .open_or_create()
+            .map_err(|e| open_err(spec.name, e))
+    }
+}
+
+pub struct IpcPublisher<E: Pod + ZeroCopy, H: Pod + ZeroCopy> {
+    name: &'static str,
+    // Field order is drop order: ports before their services.
+    publisher: iceoryx2::port::publisher::Publisher<Ipc, [E], H>,
+    notifier: iceoryx2::port::notifier::Notifier<Ipc>,
+    service: ps::PortFactory<Ipc, [E], H>,
+    _event: ev::PortFactory<Ipc>,
+}
+
+pub struct IpcSubscriber<E: Pod + ZeroCopy, H: Pod + ZeroCopy> {
+    name: &'static str,
+    subscriber: iceoryx2::port::subscriber::Subscriber<Ipc, [E], H>,
+    listener: iceoryx2::port::listener::Listener<Ipc>,
+    service: ps::PortFactory<Ipc, [E], H>,
+    _event: ev::PortFactory<Ipc>,
+}
+
+impl crate::Transport for Iceoryx2 {
+    type Publisher<E: Pod + ZeroCopy, H: Pod + ZeroCopy> = IpcPublisher<E, H>;
+    type Subscriber<E: Pod + ZeroCopy, H: Pod + ZeroCopy> = IpcSubscriber<E, H>;
+
+    fn publisher<E: Pod + ZeroCopy, H: Pod + ZeroCopy>(
+        &self,
+        spec: &ServiceSpec,
+        initial_len: usize,
+    ) -> Result<Self::Publisher<E, H>, TransportError> {
+        let service = self.pubsub::<E, H>(spec)?;
+        let event = self.event(spec)?;
+        let publisher = service
+            .publisher_builder()
+            .initial_max_slice_len(initial_len.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .max_loaned_samples(1)
+            .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+            .create()
+            .map_err(|e| open_err(spec.name, e))?;
+        let notifier = event.notifier_builder().create().map_err(|e| open_err(spec.name, e))?;
+        Ok(IpcPublisher {
+            name: spec.name,
+            publisher,
+            notifier,
+            service,
+            _event: event,
+        })
+    }
+
+    fn subscriber<E: Pod + ZeroCopy, H: Pod + ZeroCopy>(&self, spec: &ServiceSpec) -> Result<Self::Subscriber<E, H>, TransportError> {
+        let service = self.pubsub::<E, H>(spec)?;
+        let event = self.event(spec)?;
+        // The listener exists before anyone can be told to send: a notification only reaches
+        // listeners that exist when it is sent.
+        let listener = event.listener_builder().create().map_err(|e| open_err(spec.name, e))?;
+        let subscriber = service.subscriber_builder().create().map_err(|e| open_err(spec.name, e))?;
+        Ok(IpcSubscriber {
+            name: spec.name,
+            subscriber,
+            listener,
+            service,
+            _event: event,
+        })
+    }
+
+    fn dead_peers(&self) -> Vec<String> {
+        let mut dead = Vec::new();
+        let _ = Node::<Ipc>::list(self.node.config(), |state| {
+            if let NodeState::Dead(view) = state {
+                let who = match view.details() {
+                    Some(d) => format!("{} (pid {})", d.name().as_str(), d.process_id().value()),
+                    None => "an unnamed participant".to_string(),
+                };
+                dead.push(who);
+                let _ = view.try_remove_stale_resources();
+            }
+            CallbackProgression::Continue
+        });
+        dead
+    }
+}
+
+impl<E: Pod + ZeroCopy, H: Pod + ZeroCopy> crate::Publisher<E, H> for IpcPublisher<E, H> {
+    fn publish(&mut self, len: usize, fill: impl FnOnce(&mut H, &mut [E])) -> Result<(), TransportError> {
+        let mut sample = self.publisher.loan_slice_uninit(len).map_err(|e| io_err(self.name, e))?;
+        let payload = sample.payload_mut();
+        // SAFETY: the chunk lies in a shared-memory segment that the OS handed out zero-filled
+        // and that afterwards only ever holds earlier messages of this service, so its bytes
+        // are initialized; `E: Pod` makes any bytes a valid `E`. `fill` overwrites them.
+        let payload: &mut [E] = unsafe { &mut *(payload as *mut [std::mem::MaybeUninit<E>] as *mut [E]) };
+        let mut header = H::default();
+        fill(&mut header, payload);
+        // SAFETY: every element was initialized, see above.
+        let mut sample = unsafe { sample.assume_init() };
+        *sample.user_header_mut() = header;
+        sample.send().map_err(|e| io_err(self.name, e))?;
+        self.notifier.notify().map_err(|e| io_err(self.name, e))?;
+        Ok(())
+    }
+
+    fn subscriber_count(&self) -> usize {
+        let _ = self.publisher.update_connections();
+        self.service.dynamic_config().number_of_subscribers()
+    }
+}
+
+impl<E: Pod + ZeroCopy, H: Pod + ZeroCopy> crate::Subscriber<E, H> for IpcSubscriber<E, H> {
+    fn receive<R>(&mut self, timeout: Duration, read: impl FnOnce(&H, &[E]) -> R) -> Result<Option<R>, TransportError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(sample) = self.subscriber.receive().map_err(|e| io_err(self.name, e))? {
+                return Ok(Some(read(sample.user_header(), sample.payload())));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            // Events are sticky: a notification sent between `receive` and here still wakes us.
+            self.listener.timed_wait(|_| {}, deadline - now).map_err(|e| io_err(self.name, e))?;
+        }
+    }
+
+    fn publisher_count(&self) -> usize {
+        let _ = self.subscriber.update_connections();
+        self.service.dynamic_config().number_of_publishers()
+    }
+}
+
+/// Removes what a run left behind: dead nodes' resources, then every file of the run's
+/// prefix in `/dev/shm` and under iceoryx2's root directory. Call only when no participant
+/// of the run is alive. Returns the paths removed.
+pub fn remove_run_files(run_id: &str) -> Vec<PathBuf> {
+    if let Ok(config) = run_config(run_id) {
+        let _ = Node::<Ipc>::list(&config, |state| {
+            if let NodeState::Dead(view) = state {
+                let _ = view.try_remove_stale_resources();
+            }
+            CallbackProgression::Continue
+        });
+    }
+    let mut removed = Vec::new();
+    for path in run_files(run_id) {
+        let ok = if path.is_dir() {
+            std::fs::remove_dir_all(&path).is_ok()
+        } else {
+            std::fs::remove_file(&path).is_ok()
+        };
+        if ok {
+            removed.push(path);
+        }
+    }
+    removed
+}
+
+/// Every file or directory whose name carries the run's prefix, in `/dev/shm` and under
+/// iceoryx2's root directory (searched recursively).
+pub fn run_files(run_id: &str) -> Vec<PathBuf> {
+    let prefix = grains_protocol::names::domain_prefix(run_id);
+    let mut found = Vec::new();
+    let mut roots = vec![PathBuf::from("/dev/shm")];
+    if let Ok(config) = run_config(run_id) {
+        roots.push(PathBuf::from(config.global.root_path().to_string()));
+    }
+    fn walk(dir: &std::path::Path, prefix: &str, found: &mut Vec<PathBuf>, depth: usize) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if entry.file_name().to_string_lossy().starts_with(prefix) {
+                found.push(path);
+            } else if depth > 0 && path.is_dir() {
+                walk(&path, prefix, found, depth - 1);
+            }
+        }
+    }
+    for root in roots {
+        walk(&root, &prefix, &mut found, 4);
+    }
+    found
+}

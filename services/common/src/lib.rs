@@ -1,0 +1,67 @@
+//! What every grains participant shares, so that each service binary stays a thin loop:
+//!
+//! - [`session`]: joining a run (admission by the launcher, connection of every port, the
+//!   start barrier), receiving with liveness checks, header checks;
+//! - [`solver`]: the participant loop of a solver (DEM or MPM) behind the [`solver::Solver`]
+//!   trait, which the physics services implement;
+//! - [`synthetic`]: the synthetic solver of test scenes (issue 2), clearly apart from physics;
+//! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares.
+
+pub mod cli;
+pub mod session;
+pub mod signals;
+pub mod solver;
+pub mod synthetic;
+
+/// Why a participant stopped without finishing; chooses the exit code.
+#[derive(Debug, thiserror::Error)]
+pub enum Halt {
+    /// SIGINT/SIGTERM, or the launcher's stop flag (in-process runs).
+    #[error("stopped by a signal or by the launcher")]
+    Interrupted,
+    /// The launcher refused this participant (protocol version, scene, role).
+    #[error("{0}")]
+    Refused(String),
+    /// A peer of the run died.
+    #[error("{0}")]
+    PeerDied(String),
+}
+
+/// Exit code of a participant for an error: 2 bad input or refused, 130 interrupted, 1 else.
+pub fn exit_code(err: &anyhow::Error) -> u8 {
+    match err.downcast_ref::<Halt>() {
+        Some(Halt::Interrupted) => 130,
+        Some(Halt::Refused(_)) => 2,
+        Some(Halt::PeerDied(_)) => 1,
+        None if err.downcast_ref::<grains_protocol::scene::SceneError>().is_some() => 2,
+        None => 1,
+    }
+}
+
+/// The whole `main` of a participant binary: load the scene (exit 2 on bad input), join the
+/// run's iceoryx2 domain, run `body`, report an error once on stderr, pick the exit code.
+pub fn participant_main(
+    role: grains_protocol::Role,
+    args: &cli::CommonArgs,
+    body: impl FnOnce(&grains_transport::ipc::Iceoryx2, &grains_protocol::scene::Scene, &solver::ParticipantOptions) -> anyhow::Result<()>,
+) -> std::process::ExitCode {
+    let run = || -> anyhow::Result<()> {
+        let scene = grains_protocol::scene::load(&args.scene)?;
+        let transport = grains_transport::ipc::Iceoryx2::join(&args.run_id, role.binary())?;
+        let opts = solver::ParticipantOptions {
+            run_id: args.run_id.clone(),
+            stop: signals::StopFlag::with_signals(),
+            connect_timeout: args.connect_timeout(),
+            protocol_version: args.claim_protocol_version.unwrap_or(grains_protocol::PROTOCOL_VERSION),
+            checksums: scene.synthetic.as_ref().is_none_or(|s| s.checksum),
+        };
+        body(&transport, &scene, &opts)
+    };
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("{}: error: {err:#}", role.binary());
+            std::process::ExitCode::from(exit_code(&err))
+        }
+    }
+}

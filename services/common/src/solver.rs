@@ -1,0 +1,241 @@
+//! The participant loop of a solver (DEM or MPM), the same for every solver behind the
+//! [`Solver`] trait, and the time-owner helpers (control commands) that a solver running
+//! alone shares with the coupler.
+
+use crate::Halt;
+use crate::session::Session;
+use anyhow::bail;
+use grains_protocol::names;
+use grains_protocol::wire::{Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
+use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
+use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
+use std::time::{Duration, Instant};
+
+/// The macro-step a solver is asked to take.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepWindow {
+    pub step: u64,
+    /// Simulated time at the start of the step [s].
+    pub time: f64,
+    pub dt: f64,
+    /// DEM substeps per macro-step.
+    pub substeps: u32,
+}
+
+/// What a solver reports after each step (the physics half of [`Summary`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SolverReport {
+    pub n_items: u64,
+    pub n_nodes: u64,
+    pub mass: f64,
+    pub momentum: [f64; 3],
+    pub kinetic_energy: f64,
+    /// Checksum of the raster sent, when checksums are on.
+    pub checksum: u64,
+}
+
+/// A solver as the participant loop drives it (Yue 2018 Alg. 1, one macro-step):
+/// [`Solver::predict`] up to the coupling point, [`Solver::write_raster`] into the loaned
+/// message, then [`Solver::finish`] with the coupler's velocities. Without a coupler in the
+/// run, [`Solver::step_alone`] takes the whole step.
+pub trait Solver {
+    /// Advances to the coupling point and returns the number of raster nodes to send.
+    fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize>;
+    /// Writes the raster (sorted by node) in place into the message.
+    fn write_raster(&mut self, window: &StepWindow, out: &mut [RasterNode]);
+    /// Takes the constrained node velocities and completes the step.
+    fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()>;
+    /// A whole step when the solver is the only one in the run.
+    fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()>;
+    /// State after the last step.
+    fn report(&self) -> SolverReport;
+}
+
+/// Participant options that do not come from the scene.
+#[derive(Clone, Debug)]
+pub struct ParticipantOptions {
+    pub run_id: String,
+    pub stop: crate::signals::StopFlag,
+    pub connect_timeout: Option<Duration>,
+    pub protocol_version: u32,
+    /// Compute and verify payload checksums.
+    pub checksums: bool,
+}
+
+/// Runs one solver participant to the end of the run.
+pub fn run<T: Transport, S: Solver>(
+    transport: &T,
+    role: Role,
+    scene: &Scene,
+    opts: &ParticipantOptions,
+    solver: &mut S,
+) -> anyhow::Result<()> {
+    let mut session = Session::join(
+        transport,
+        role,
+        &opts.run_id,
+        scene.hash,
+        opts.stop.clone(),
+        opts.connect_timeout,
+        opts.protocol_version,
+    )?;
+    if scene.time_owner() == role {
+        return run_alone(&mut session, scene, solver);
+    }
+    let raster_spec = if role == Role::Dem { names::DEM_RASTER } else { names::MPM_RASTER };
+    let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
+    let mut vel_sub = session.subscriber::<NodeVelocity, StepHeader>(&names::VELOCITIES)?;
+    let mut raster_pub = session.publisher::<RasterNode, StepHeader>(&raster_spec, 1024)?;
+    let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+    session.wait_until("the coupler and the launcher", |_| {
+        step_sub.publisher_count() >= 1
+            && vel_sub.publisher_count() >= 1
+            && raster_pub.subscriber_count() >= 1
+            && summary_pub.subscriber_count() >= 1
+    })?;
+    session.ready()?;
+
+    loop {
+        let wait_start = Instant::now();
+        let begin = session.recv(&mut step_sub, "the next step", |h, b| (*h, b.first().copied()))?;
+        let (h, b) = (begin.0, begin.1.unwrap_or_default());
+        session.check_message::<StepBegin>(&names::STEP_BEGIN, &h, h.step, &[])?;
+        if b.flags & STEP_STOP != 0 {
+            return Ok(());
+        }
+        let window = StepWindow {
+            step: h.step,
+            time: h.time,
+            dt: h.dt,
+            substeps: b.substeps,
+        };
+        let mut wait = wait_start.elapsed();
+        let compute_start = Instant::now();
+
+        let n = solver.predict(&window)?;
+        let header = session.header(window.step, window.time, window.dt);
+        let mut sent_checksum = 0;
+        raster_pub.publish(n, |hdr, out| {
+            solver.write_raster(&window, out);
+            *hdr = header;
+            if opts.checksums {
+                hdr.checksum = checksum_bytes(as_bytes(out));
+                sent_checksum = hdr.checksum;
+            }
+        })?;
+        let mut compute = compute_start.elapsed();
+
+        let wait_start = Instant::now();
+        let mut finish_time = Duration::ZERO;
+        session.recv(&mut vel_sub, "the constrained velocities", |h, v| -> anyhow::Result<()> {
+            session.check_message(&names::VELOCITIES, h, window.step, v)?;
+            let t = Instant::now();
+            solver.finish(&window, v)?;
+            finish_time = t.elapsed();
+            Ok(())
+        })??;
+        wait += wait_start.elapsed() - finish_time;
+        compute += finish_time;
+
+        let mut report = solver.report();
+        report.checksum = sent_checksum;
+        publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
+    }
+}
+
+/// A solver that owns time: it steps by itself and obeys control commands between steps.
+fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scene, solver: &mut S) -> anyhow::Result<()> {
+    let mut control = session.subscriber::<Control, StepHeader>(&names::CONTROL)?;
+    let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+    session.wait_until("the launcher", |_| {
+        control.publisher_count() >= 1 && summary_pub.subscriber_count() >= 1
+    })?;
+    session.ready()?;
+    let mut clock = RunClock::default();
+    for step in 1..=scene.steps {
+        if !clock.obey_control(session, &mut control)? {
+            break;
+        }
+        let window = StepWindow {
+            step,
+            time: (step - 1) as f64 * scene.dt,
+            dt: scene.dt,
+            substeps: scene.coupling.substeps,
+        };
+        let t = Instant::now();
+        solver.step_alone(&window)?;
+        publish_summary(session, &mut summary_pub, &window, &solver.report(), t.elapsed(), Duration::ZERO)?;
+    }
+    Ok(())
+}
+
+/// Sends this participant's summary of one step.
+pub fn publish_summary<T: Transport>(
+    session: &Session<'_, T>,
+    summary_pub: &mut T::Publisher<Summary, StepHeader>,
+    window: &StepWindow,
+    r: &SolverReport,
+    compute: Duration,
+    wait: Duration,
+) -> anyhow::Result<()> {
+    let summary = Summary {
+        role: session.role as u32,
+        status: 0,
+        step: window.step,
+        time: window.time + window.dt,
+        n_items: r.n_items,
+        n_nodes: r.n_nodes,
+        mass: r.mass,
+        momentum: r.momentum,
+        kinetic_energy: r.kinetic_energy,
+        checksum: r.checksum,
+        compute_ns: compute.as_nanos() as u64,
+        wait_ns: wait.as_nanos() as u64,
+    };
+    let header = session.header(window.step, window.time, window.dt);
+    summary_pub.publish(1, |h, out| {
+        *h = header;
+        out[0] = summary;
+    })?;
+    Ok(())
+}
+
+/// Pause/resume/stop state of the time owner.
+#[derive(Debug, Default)]
+pub struct RunClock {
+    paused: bool,
+}
+
+impl RunClock {
+    /// Applies pending control commands; while paused, blocks on the control service (with
+    /// liveness checks). Returns `false` when the run must stop before the next step.
+    pub fn obey_control<T: Transport>(
+        &mut self,
+        session: &Session<'_, T>,
+        control: &mut T::Subscriber<Control, StepHeader>,
+    ) -> anyhow::Result<bool> {
+        loop {
+            let timeout = if self.paused { crate::session::POLL } else { Duration::ZERO };
+            match control.receive(timeout, |_, c| c.first().copied())? {
+                Some(Some(c)) => match Command::from_code(c.command) {
+                    Some(Command::Stop) => return Ok(false),
+                    Some(Command::Pause) => self.paused = true,
+                    Some(Command::Resume) => self.paused = false,
+                    // Snapshot and set act on solvers' state: they arrive with the solvers.
+                    Some(Command::Snapshot | Command::Set) | None => {}
+                },
+                Some(None) => {}
+                None if self.paused => session.check_alive("a resume command")?,
+                None => return Ok(true),
+            }
+        }
+    }
+}
+
+/// Stops with [`Halt::Interrupted`] when the session's stop flag is set.
+pub fn check_stop<T: Transport>(session: &Session<'_, T>) -> anyhow::Result<()> {
+    if session.stop.is_set() {
+        bail!(Halt::Interrupted);
+    }
+    Ok(())
+}
