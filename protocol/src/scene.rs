@@ -307,7 +307,7 @@ pub fn from_str(text: &str, path: &Path, hash: u64) -> Result<Scene, SceneError>
             format!("the file is empty; a scene needs at least `schema = {SCHEMA_VERSION}`, [run] and [domain] (see scenes/README.md)"),
         ));
     }
-    let raw: raw::RawScene = toml::from_str(text).map_err(|e| ctx.from_toml(&e))?;
+    let raw: raw::RawScene = toml::from_str(text).map_err(|e| ctx.toml_error(&e))?;
     validate(&ctx, raw, hash)
 }
 
@@ -334,7 +334,7 @@ impl Ctx<'_> {
     }
 
     /// A serde/TOML error: keep its message, add the key written on the offending line.
-    fn from_toml(&self, e: &toml::de::Error) -> SceneError {
+    fn toml_error(&self, e: &toml::de::Error) -> SceneError {
         let span = e.span();
         let field = span.clone().and_then(|s| self.key_on_line_of(s.start));
         let message = e.message().trim().replace('\n', " ");
@@ -346,13 +346,26 @@ impl Ctx<'_> {
         }
     }
 
+    /// The dotted key written on the line of `offset`, prefixed by the table it sits in.
     fn key_on_line_of(&self, offset: usize) -> Option<String> {
         let start = self.text[..offset.min(self.text.len())].rfind('\n').map_or(0, |i| i + 1);
         let line = self.text[start..].lines().next()?;
         let (key, _) = line.split_once('=')?;
         let key = key.trim();
         let ok = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-');
-        ok.then(|| key.to_string())
+        if !ok {
+            return None;
+        }
+        let table = self.text[..start]
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('['))
+            .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+        Some(match table {
+            Some(t) => format!("{t}.{key}"),
+            None => key.to_string(),
+        })
     }
 }
 
@@ -1065,10 +1078,10 @@ mpm_nodes = 50
         check_err(
             &GOOD.replace("steps = 10", "steps = 10\nbogus = 3"),
             Some(7),
-            "bogus",
+            "run.bogus",
             "unknown field",
         );
-        check_err(&GOOD.replace("dt = 1e-4", "dt = \"fast\""), Some(5), "dt", "invalid type");
+        check_err(&GOOD.replace("dt = 1e-4", "dt = \"fast\""), Some(5), "run.dt", "invalid type");
         check_err(&GOOD.replace("dimension = 2", "dimension = 4"), Some(4), "run.dimension", "2 or 3");
         check_err(
             &GOOD.replace("max = [1.0, 1.0]", "max = [1.0, 1.0, 1.0]"),

@@ -8,6 +8,7 @@
 
 use crate::{Pod, ServiceSpec, TransportError, ZeroCopy};
 use iceoryx2::node::NodeView;
+use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as ev, publish_subscribe as ps};
@@ -38,6 +39,9 @@ fn io_err(service: &str, e: impl Debug) -> TransportError {
 
 /// The iceoryx2 configuration of a run: the global defaults with the run's prefix.
 pub fn run_config(run_id: &str) -> Result<Config, TransportError> {
+    // iceoryx2 warns on every start that it found no config file: keep its log to errors
+    // unless IOX2_LOG_LEVEL says otherwise.
+    set_log_level_from_env_or(LogLevel::Error);
     let prefix = grains_protocol::names::domain_prefix(run_id);
     let mut config = Config::global_config().clone();
     config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| open_err("domain prefix", e))?;
@@ -48,7 +52,6 @@ impl Iceoryx2 {
     /// Joins the domain of `run_id` as the node `node_name` (`grains-dem`, …). Signal handling
     /// stays with the caller: grains processes handle SIGINT/SIGTERM themselves.
     pub fn join(run_id: &str, node_name: &str) -> Result<Self, TransportError> {
-        set_log_level_from_env_or(LogLevel::Error);
         let config = run_config(run_id)?;
         let name = NodeName::new(node_name).map_err(|e| open_err(node_name, e))?;
         let node = NodeBuilder::new()
@@ -203,7 +206,13 @@ impl<E: Pod + ZeroCopy, H: Pod + ZeroCopy> crate::Subscriber<E, H> for IpcSubscr
                 return Ok(None);
             }
             // Events are sticky: a notification sent between `receive` and here still wakes us.
-            self.listener.timed_wait(|_| {}, deadline - now).map_err(|e| io_err(self.name, e))?;
+            // A signal (SIGINT/SIGTERM) interrupts the wait: report a timeout, so that the
+            // caller checks its stop flag and stops at a clean point.
+            match self.listener.timed_wait(|_| {}, deadline - now) {
+                Ok(_) => {}
+                Err(ListenerWaitError::InterruptSignal) => return Ok(None),
+                Err(e) => return Err(io_err(self.name, e)),
+            }
         }
     }
 

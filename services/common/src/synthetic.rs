@@ -108,9 +108,9 @@ impl Solver for SyntheticSolver {
             *slot = RasterNode { node, mass, momentum };
             r.mass += mass;
             let mut p2 = 0.0;
-            for k in 0..3 {
-                r.momentum[k] += momentum[k];
-                p2 += momentum[k] * momentum[k];
+            for (total, p) in r.momentum.iter_mut().zip(momentum) {
+                *total += p;
+                p2 += p * p;
             }
             r.kinetic_energy += 0.5 * p2 / mass;
         }

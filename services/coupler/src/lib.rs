@@ -16,7 +16,7 @@ use grains_protocol::wire::{NodeVelocity, RasterNode};
 #[inline]
 pub fn constrained_velocity(m_dem: f64, p_dem: [f64; 3], m_mpm: f64, p_mpm: [f64; 3]) -> Option<[f64; 3]> {
     let m = m_dem + m_mpm;
-    if !(m > 0.0) {
+    if m.is_nan() || m <= 0.0 {
         return None;
     }
     Some([(p_dem[0] + p_mpm[0]) / m, (p_dem[1] + p_mpm[1]) / m, (p_dem[2] + p_mpm[2]) / m])
@@ -83,9 +83,9 @@ pub fn constrain(dem: &[RasterNode], mpm: &[RasterNode], out: &mut [NodeVelocity
                 r.mass += m;
                 r.kinetic_energy_before += ke(a.mass, a.momentum) + ke(b.mass, b.momentum);
                 r.kinetic_energy_after += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-                for c in 0..3 {
+                for (c, vc) in v.iter().enumerate() {
                     r.momentum_before[c] += a.momentum[c] + b.momentum[c];
-                    r.momentum_after[c] += m * v[c];
+                    r.momentum_after[c] += m * vc;
                 }
                 k += 1;
                 i += 1;

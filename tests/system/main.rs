@@ -1,0 +1,246 @@
+//! System tests of issue 2: the real binaries, as separate processes and as threads.
+//! Build the binaries first (the README's test command does): `cargo build --release --workspace --bins`.
+
+use grains_system_tests::*;
+use std::time::{Duration, Instant};
+
+const LONG: Duration = Duration::from_secs(300);
+
+fn run_to_end(args: &[&str]) -> (std::process::ExitStatus, String) {
+    let mut r = Running::grains(args);
+    let status = r.wait_exit(LONG);
+    (status, r.stderr())
+}
+
+#[test]
+fn processes_exchange_million_node_rasters_and_inproc_gives_the_same_metrics() {
+    let _machine = machine();
+    let out = out_dir("million");
+    let out_s = out.to_str().unwrap();
+    let scene = "tests/scenes/synthetic_1m.toml";
+
+    let (status, ipc_err) = run_to_end(&["run", scene, "--out", out_s, "--quiet"]);
+    assert!(status.success(), "{ipc_err}");
+    let ipc_dir = run_dir(&ipc_err);
+
+    // Separate OS processes: three distinct pids, none of them the launcher's.
+    let summary = summary(&ipc_dir);
+    assert_eq!(summary["status"], "completed");
+    assert_eq!(summary["transport"], "ipc");
+    let pids: Vec<u64> = summary["participants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["pid"].as_u64().unwrap())
+        .collect();
+    assert_eq!(pids.len(), 3);
+    let mut distinct = pids.clone();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), 3, "participants must be separate processes: {pids:?}");
+
+    // 200 macro-steps, each raster at least 1,000,000 nodes, each checked by its receiver.
+    let rows = metrics_rows(&ipc_dir);
+    assert_eq!(rows.len(), 200);
+    for role in ["dem", "mpm"] {
+        let nodes: Vec<u64> = column(&ipc_dir, &format!("{role}_nodes"))
+            .iter()
+            .map(|v| v.parse().unwrap())
+            .collect();
+        assert!(
+            nodes.iter().all(|&n| n >= 1_000_000),
+            "{role} raster below 1e6 nodes: min {:?}",
+            nodes.iter().min()
+        );
+        let mut lengths = nodes.clone();
+        lengths.dedup();
+        assert!(lengths.len() > 100, "raster lengths must change from step to step");
+    }
+    assert!(
+        column(&ipc_dir, "coupler_items")
+            .iter()
+            .all(|v| v.parse::<u64>().unwrap() > 500_000)
+    );
+
+    // The same scene as threads of one process: byte-identical physics columns.
+    let (status, inproc_err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
+    assert!(status.success(), "{inproc_err}");
+    let inproc_dir = run_dir(&inproc_err);
+    let a = std::fs::read_to_string(ipc_dir.join("metrics.csv")).unwrap();
+    let b = std::fs::read_to_string(inproc_dir.join("metrics.csv")).unwrap();
+    let (a, b) = (
+        grains_launch::outputs::physics_columns(&a),
+        grains_launch::outputs::physics_columns(&b),
+    );
+    assert!(a.lines().count() == 201 && a == b, "metrics differ between transports");
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn killing_any_participant_ends_the_run_within_2_s_and_leaves_nothing() {
+    let _machine = machine();
+    let out = out_dir("kill");
+    let out_s = out.to_str().unwrap();
+    for victim in ["grains-dem", "grains-mpm", "grains-coupler"] {
+        let mut launcher = Running::grains(&["run", "tests/scenes/synthetic_long.toml", "--out", out_s]);
+        let err = launcher.wait_for("started as processes", Duration::from_secs(60));
+        let run_id = run_id(&err);
+        let dir = run_dir(&err);
+        // Mid-run: wait until some rows are on disk.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
+            assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let pid = pid_of(&err, victim);
+        let killed = Instant::now();
+        // SAFETY: kill(2) on a child of our child, by pid.
+        assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+        let status = launcher.wait_exit(Duration::from_secs(30));
+        let took = killed.elapsed();
+        let err = launcher.stderr();
+        assert!(!status.success(), "launcher must fail when {victim} dies: {err}");
+        assert!(
+            took < Duration::from_secs(2),
+            "launcher took {took:?} to notice {victim}'s death: {err}"
+        );
+        let named = err.lines().any(|l| l.contains("error") && l.contains(victim));
+        assert!(named, "the error must name {victim}: {err}");
+        let left = grains_transport::ipc::run_files(&run_id);
+        assert!(left.is_empty(), "files of run {run_id} left after killing {victim}: {left:?}");
+        assert_eq!(summary(&dir)["status"], "failed");
+        assert!(dir.join("metrics.csv").exists(), "metrics must be kept on failure");
+
+        // A new run starts at once and succeeds.
+        let (status, err) = run_to_end(&["run", "tests/scenes/synthetic_small.toml", "--out", out_s, "--quiet"]);
+        assert!(status.success(), "run after killing {victim}: {err}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn two_runs_at_once_do_not_interfere() {
+    let _machine = machine();
+    let out = out_dir("two");
+    let out_s = out.to_str().unwrap();
+    let args = ["run", "tests/scenes/synthetic_small.toml", "--out", out_s, "--quiet"];
+    let mut a = Running::grains(&args);
+    let mut b = Running::grains(&args);
+    let (sa, sb) = (a.wait_exit(LONG), b.wait_exit(LONG));
+    assert!(sa.success(), "{}", a.stderr());
+    assert!(sb.success(), "{}", b.stderr());
+    let (da, db) = (run_dir(&a.stderr()), run_dir(&b.stderr()));
+    assert_ne!(da, db);
+    // Same scene, so the same physics: anything crossing between the runs would show here.
+    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(metrics_rows(&da).len(), 60);
+    assert_eq!(read(&da), read(&db));
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn broken_scene_files_exit_2_naming_file_and_field() {
+    let out = out_dir("bad");
+    let garbage = out.join("garbage.toml");
+    let bytes: Vec<u8> = (0..4096u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+    std::fs::write(&garbage, &bytes).unwrap();
+    let garbage = garbage.to_str().unwrap().to_string();
+    let cases: Vec<(String, &[&str])> = vec![
+        (
+            "tests/scenes/bad/unknown_field.toml".into(),
+            &[":10:", "domain.cell_sise", "unknown field"],
+        ),
+        ("tests/scenes/bad/wrong_type.toml".into(), &[":5:", "run.dt", "invalid type"]),
+        ("tests/scenes/bad/negative_size.toml".into(), &[":10:", "domain.cell_size", "> 0"]),
+        ("tests/scenes/bad/empty.toml".into(), &["empty"]),
+        ("tests/scenes/bad/does_not_exist.toml".into(), &["cannot read"]),
+        (garbage.clone(), &["not a text file"]),
+    ];
+    for (file, needles) in cases {
+        let (status, err) = run_to_end(&["run", &file, "--out", out.to_str().unwrap()]);
+        assert_eq!(status.code(), Some(2), "{file}: {err}");
+        assert!(err.contains(&file), "{file}: the message must name the file: {err}");
+        for needle in needles {
+            assert!(err.contains(needle), "{file}: expected {needle:?} in: {err}");
+        }
+        assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{file}: {err}");
+        assert_eq!(err.lines().count(), 1, "{file}: one line, no backtrace: {err}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
+    let _machine = machine();
+    let out = out_dir("external");
+    let scene = "tests/scenes/synthetic_small.toml";
+    let mut launcher = Running::grains(&["run", scene, "--out", out.to_str().unwrap(), "--external", "coupler", "--quiet"]);
+    let err = launcher.wait_for("waiting for an external coupler", Duration::from_secs(60));
+    let run_id = run_id(&err);
+    let coupler = bin("grains-coupler");
+
+    // A coupler of another protocol version: refused, and both sides say why.
+    let mut bad = Running::start(
+        &coupler,
+        &["--scene", scene, "--run-id", &run_id, "--claim-protocol-version", "999"],
+    );
+    let status = bad.wait_exit(Duration::from_secs(30));
+    assert_eq!(status.code(), Some(2), "{}", bad.stderr());
+    assert!(
+        bad.stderr().contains("protocol version 999") && bad.stderr().contains("version 1"),
+        "{}",
+        bad.stderr()
+    );
+    launcher.wait_for("refused grains-coupler", Duration::from_secs(10));
+    assert!(launcher.stderr().contains("protocol version 999"), "{}", launcher.stderr());
+
+    // The run is still waiting; a good coupler attaches later and the run completes.
+    std::thread::sleep(Duration::from_millis(300));
+    let mut good = Running::start(&coupler, &["--scene", scene, "--run-id", &run_id]);
+    assert!(good.wait_exit(LONG).success(), "{}", good.stderr());
+    let status = launcher.wait_exit(LONG);
+    assert!(status.success(), "{}", launcher.stderr());
+    let dir = run_dir(&launcher.stderr());
+    assert_eq!(metrics_rows(&dir).len(), 60);
+    let parts = summary(&dir)["participants"].clone();
+    assert!(
+        parts
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p["role"] == "coupler" && p["external"] == true),
+        "{parts}"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn ctrl_c_stops_every_participant_cleanly_and_keeps_the_outputs() {
+    let _machine = machine();
+    let out = out_dir("interrupt");
+    let mut launcher = Running::grains(&["run", "tests/scenes/synthetic_long.toml", "--out", out.to_str().unwrap()]);
+    let err = launcher.wait_for("started as processes", Duration::from_secs(60));
+    let (run_id, dir) = (run_id(&err), run_dir(&err));
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
+        assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SAFETY: kill(2) on our child's pid.
+    assert_eq!(unsafe { libc::kill(launcher.child.id() as i32, libc::SIGINT) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(30));
+    assert_eq!(status.code(), Some(130), "{}", launcher.stderr());
+    let summary = summary(&dir);
+    assert_eq!(summary["status"], "interrupted", "{summary}");
+    // Every participant stopped at a step boundary by itself (exit 0), none was killed.
+    for p in summary["participants"].as_array().unwrap() {
+        assert_eq!(p["exit"], "exited with code 0", "{summary}");
+    }
+    let rows = metrics_rows(&dir).len() as u64;
+    assert!(
+        rows >= 20 && rows == summary["steps_completed"].as_u64().unwrap(),
+        "{rows} rows, {summary}"
+    );
+    assert!(grains_transport::ipc::run_files(&run_id).is_empty());
+    std::fs::remove_dir_all(&out).unwrap();
+}
