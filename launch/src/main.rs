@@ -68,6 +68,7 @@ fn main() -> ExitCode {
                 external,
                 out_root: out,
                 progress: !quiet,
+                announce: true,
             };
             grains_launch::run::run(&opts).map(|o| {
                 eprintln!(

@@ -38,6 +38,8 @@ pub struct RunOptions {
     pub out_root: PathBuf,
     /// Live progress on stderr.
     pub progress: bool,
+    /// Say on stderr what the run is (id, output directory, participants) and how it ended.
+    pub announce: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -211,14 +213,16 @@ fn supervise<T: Transport>(
         TransportKind::Inproc => "threads",
     };
     let pids: Vec<String> = parts.pids().iter().map(|(r, p)| format!("{} (pid {p})", r.binary())).collect();
-    eprintln!(
-        "grains: run {} of scene {} ({} steps), output in {}",
-        ctx.run_id,
-        scene.name,
-        scene.steps,
-        ctx.dir.display()
-    );
-    if !pids.is_empty() {
+    if ctx.opts.announce {
+        eprintln!(
+            "grains: run {} of scene {} ({} steps), output in {}",
+            ctx.run_id,
+            scene.name,
+            scene.steps,
+            ctx.dir.display()
+        );
+    }
+    if ctx.opts.announce && !pids.is_empty() {
         eprintln!("grains: started as {how}: {}", pids.join(", "));
     }
     for e in &ctx.opts.external {
@@ -350,7 +354,9 @@ fn supervise<T: Transport>(
             break;
         }
     }
-    progress.finish(metrics.last, release);
+    if ctx.opts.announce {
+        progress.finish(metrics.last, release);
+    }
 
     let steps_done = metrics.last.map_or(0, |(s, _)| s);
     let stepping = release.map_or(Duration::ZERO, |r| r.elapsed());
