@@ -1,0 +1,23 @@
+//! DEM of grains: 2D disks and 3D spheres (Yue 2018 §3.2, Chen 2021 §2.1).
+//!
+//! - [`space`]: the dimension as a type ([`space::D2`], [`space::D3`]) so 2D and 3D share kernels;
+//! - [`state`]: plain data — [`state::Grains`] (structure of arrays), walls, domain, parameters;
+//! - [`contact`]: the contact law kernels (normal spring–dashpot from restitution, tangential
+//!   anchor spring with the Coulomb cap, cohesion);
+//! - [`neighbors`]: cell lists → Verlet list with a skin, history carried by grain ids;
+//! - [`pipeline`]: the velocity-Verlet step over all of it, parallel and deterministic;
+//! - [`packing`]: seeded polydisperse radii and initial placements.
+//!
+//! No I/O, no transport, no wall clock: the service wraps it.
+
+pub mod contact;
+pub mod neighbors;
+pub mod packing;
+pub mod pipeline;
+pub mod space;
+pub mod state;
+
+pub use contact::ContactParams;
+pub use pipeline::DemPipeline;
+pub use space::{D2, D3, Space};
+pub use state::{DemParams, DemState, Domain, Grains, Wall, WallShape};

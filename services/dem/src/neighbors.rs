@@ -1,0 +1,345 @@
+//! Verlet neighbour lists built from cell lists, with a skin.
+//!
+//! Grain pairs closer than r_i + r_j + skin, and grain–wall pairs closer than r + skin, are
+//! listed; the list stays valid until some grain (or wall) has moved more than skin/2 since
+//! the build. Pairs are listed once (i < j) in grain order, so the list, and everything
+//! computed over it, is the same whatever the thread count. Contact history is carried from
+//! one list to the next by the pair's grain ids, so it survives any reordering of the arrays.
+
+use crate::contact::ContactState;
+use crate::space::{Space, Vector};
+use crate::state::{DemState, WallShape};
+use rayon::prelude::*;
+
+/// Contact histories keyed for lookup across a rebuild.
+type History<K, V> = Vec<(K, ContactState<V>)>;
+
+/// One listed grain pair and what the last force evaluation left for it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PairSlot<S: Space> {
+    pub i: u32,
+    pub j: u32,
+    pub state: ContactState<S::V>,
+    /// Force on grain i (grain j gets the opposite).
+    pub force: S::V,
+    /// n × force, for the torques −r_i (n × f) and −r_j (n × f).
+    pub couple: S::Ang,
+    pub active: bool,
+}
+
+/// One listed grain–wall pair.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WallSlot<S: Space> {
+    pub grain: u32,
+    pub wall: u32,
+    pub state: ContactState<S::V>,
+    pub force: S::V,
+    pub couple: S::Ang,
+    pub active: bool,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct NeighborList<S: Space> {
+    pub pairs: Vec<PairSlot<S>>,
+    pub walls: Vec<WallSlot<S>>,
+    /// For grain i, `incident[offsets[i]..offsets[i+1]]` are `pair << 1 | side` (side 1: j).
+    pub offsets: Vec<u32>,
+    pub incident: Vec<u32>,
+    /// For grain i, its wall pairs are `walls[wall_offsets[i]..wall_offsets[i+1]]`.
+    pub wall_offsets: Vec<u32>,
+    x_built: Vec<S::V>,
+    /// Grain ids at the last build: the indices stored in the list refer to them.
+    ids_built: Vec<u64>,
+    wall_anchor_built: Vec<S::V>,
+    skin: f64,
+    pub builds: u64,
+}
+
+/// Separation x_i − x_j with periodic axes wrapped (minimum image).
+#[inline]
+pub fn separation<S: Space>(xi: S::V, xj: S::V, period: S::V, inv: S::V) -> S::V {
+    (xi - xj).min_image(period, inv)
+}
+
+/// The periodic lengths (0 on open axes) and their inverses.
+pub fn periods<S: Space>(state: &DemState<S>) -> (S::V, S::V) {
+    let d = &state.params.domain;
+    let mut p = [0.0; 3];
+    let mut inv = [0.0; 3];
+    for k in 0..S::DIM {
+        if d.periodic[k] {
+            p[k] = d.length(k);
+            inv[k] = 1.0 / p[k];
+        }
+    }
+    (S::from_array(p), S::from_array(inv))
+}
+
+/// Reference point of a wall that moves with it (for the rebuild criterion).
+fn wall_anchor<S: Space>(shape: &WallShape<S>) -> S::V {
+    match *shape {
+        WallShape::Plane { point, .. } => point,
+        WallShape::Drum { center, .. } => center,
+    }
+}
+
+/// Distance from a grain centre to a wall's surface, positive on the grains' side.
+#[inline]
+pub fn wall_gap<S: Space>(shape: &WallShape<S>, x: S::V) -> f64 {
+    match *shape {
+        WallShape::Plane { point, normal } => (x - point).dot(normal),
+        WallShape::Drum { center, radius } => {
+            let mut d = S::to_array(x - center);
+            d[2] = 0.0;
+            radius - (d[0] * d[0] + d[1] * d[1]).sqrt()
+        }
+    }
+}
+
+impl<S: Space> NeighborList<S> {
+    /// Whether the list must be rebuilt before the next force evaluation.
+    pub fn stale(&self, state: &DemState<S>) -> bool {
+        let g = &state.grains;
+        if self.x_built.len() != g.len() || self.wall_anchor_built.len() != state.walls.len() || self.skin != state.params.skin {
+            return true;
+        }
+        let (period, inv) = periods(state);
+        let limit = (0.5 * self.skin).powi(2);
+        let grain_moved =
+            g.x.par_iter()
+                .zip(&self.x_built)
+                .with_min_len(4096)
+                .any(|(&x, &x0)| separation::<S>(x, x0, period, inv).length_squared() > limit);
+        grain_moved
+            || state
+                .walls
+                .iter()
+                .zip(&self.wall_anchor_built)
+                .any(|(w, &a)| (wall_anchor(&w.shape) - a).length_squared() > limit)
+    }
+
+    /// Rebuilds the list for the current positions, carrying contact history over by ids.
+    pub fn build(&mut self, state: &DemState<S>) {
+        let g = &state.grains;
+        let n = g.len();
+        let skin = state.params.skin;
+        let (period, inv) = periods(state);
+        let domain = &state.params.domain;
+        let r_max = g.radius.iter().copied().fold(0.0, f64::max);
+        let cell = (2.0 * r_max + skin).max(1e-12);
+
+        // Cell grid: periodic axes span the domain; open axes span the grains' bounding box.
+        let mut lo = [0.0; 3];
+        let mut dims = [1usize; 3];
+        let mut wrap = [false; 3];
+        for k in 0..S::DIM {
+            if domain.periodic[k] {
+                lo[k] = domain.min[k];
+                let cells = (domain.length(k) / cell).floor() as usize;
+                // Fewer than 3 cells would list a pair twice through the wrap: one cell then.
+                if cells >= 3 {
+                    dims[k] = cells;
+                    wrap[k] = true;
+                }
+            } else {
+                let (mn, mx) = g.x.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| {
+                    let c = S::component(x, k);
+                    (a.min(c), b.max(c))
+                });
+                lo[k] = if n > 0 { mn } else { 0.0 };
+                dims[k] = if n > 0 { ((mx - mn) / cell).floor() as usize + 1 } else { 1 };
+            }
+        }
+        let cell_len = [
+            if wrap[0] { domain.length(0) / dims[0] as f64 } else { cell },
+            if wrap[1] { domain.length(1) / dims[1] as f64 } else { cell },
+            if wrap[2] { domain.length(2) / dims[2] as f64 } else { cell },
+        ];
+        let cell_of = |x: S::V| -> [usize; 3] {
+            let a = S::to_array(x);
+            let mut c = [0usize; 3];
+            for k in 0..S::DIM {
+                let mut t = (a[k] - lo[k]) / cell_len[k];
+                if wrap[k] {
+                    t = t.rem_euclid(dims[k] as f64);
+                }
+                c[k] = (t.floor().max(0.0) as usize).min(dims[k] - 1);
+            }
+            c
+        };
+        let linear = |c: [usize; 3]| (c[2] * dims[1] + c[1]) * dims[0] + c[0];
+        let n_cells = dims[0] * dims[1] * dims[2];
+
+        // Counting sort of grains by cell.
+        let cells: Vec<[usize; 3]> = g.x.par_iter().with_min_len(4096).map(|&x| cell_of(x)).collect();
+        let mut start = vec![0u32; n_cells + 1];
+        for c in &cells {
+            start[linear(*c) + 1] += 1;
+        }
+        for k in 0..n_cells {
+            start[k + 1] += start[k];
+        }
+        let mut fill = start.clone();
+        let mut sorted = vec![0u32; n];
+        for (i, c) in cells.iter().enumerate() {
+            let l = linear(*c);
+            sorted[fill[l] as usize] = i as u32;
+            fill[l] += 1;
+        }
+
+        // Pairs (i < j) per chunk of grains, concatenated in grain order.
+        let stencil: Vec<[isize; 3]> = {
+            let r = |k: usize| if k < S::DIM { -1isize..=1 } else { 0..=0 };
+            let mut s = Vec::new();
+            for dz in r(2) {
+                for dy in r(1) {
+                    for dx in r(0) {
+                        s.push([dx, dy, dz]);
+                    }
+                }
+            }
+            s
+        };
+        const CHUNK: usize = 1024;
+        let chunks: Vec<Vec<(u32, u32)>> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|chunk| {
+                let mut out = Vec::new();
+                #[allow(clippy::needless_range_loop)] // i is also the pair's first index
+                for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
+                    let c = cells[i];
+                    let (xi, ri) = (g.x[i], g.radius[i]);
+                    let mut found: Vec<u32> = Vec::new();
+                    for d in &stencil {
+                        let mut nc = [0usize; 3];
+                        let mut ok = true;
+                        for k in 0..3 {
+                            let t = c[k] as isize + d[k];
+                            if wrap[k] {
+                                nc[k] = t.rem_euclid(dims[k] as isize) as usize;
+                            } else if t < 0 || t >= dims[k] as isize {
+                                ok = false;
+                            } else {
+                                nc[k] = t as usize;
+                            }
+                        }
+                        if !ok {
+                            continue;
+                        }
+                        let l = linear(nc);
+                        for &j in &sorted[start[l] as usize..start[l + 1] as usize] {
+                            if (j as usize) <= i {
+                                continue;
+                            }
+                            let cut = ri + g.radius[j as usize] + skin;
+                            if separation::<S>(xi, g.x[j as usize], period, inv).length_squared() < cut * cut {
+                                found.push(j);
+                            }
+                        }
+                    }
+                    found.sort_unstable();
+                    out.extend(found.into_iter().map(|j| (i as u32, j)));
+                }
+                out
+            })
+            .collect();
+
+        // Carry history: old pairs that hold something, looked up by (id, id).
+        let mut old: History<(u64, u64), S::V> = self
+            .pairs
+            .iter()
+            .filter(|p| p.state != ContactState::default())
+            .filter_map(|p| {
+                let (a, b) = (*self.ids_built.get(p.i as usize)?, *self.ids_built.get(p.j as usize)?);
+                Some(if a < b {
+                    ((a, b), p.state)
+                } else {
+                    (
+                        (b, a),
+                        ContactState {
+                            spring: -p.state.spring,
+                            bonded: p.state.bonded,
+                        },
+                    )
+                })
+            })
+            .collect();
+        old.sort_unstable_by_key(|e| e.0);
+        let lookup = |a: u64, b: u64| -> ContactState<S::V> {
+            let (key, flip) = if a < b { ((a, b), false) } else { ((b, a), true) };
+            match old.binary_search_by_key(&key, |e| e.0) {
+                Ok(k) if flip => ContactState {
+                    spring: -old[k].1.spring,
+                    bonded: old[k].1.bonded,
+                },
+                Ok(k) => old[k].1,
+                Err(_) => ContactState::default(),
+            }
+        };
+        self.pairs = chunks
+            .into_iter()
+            .flatten()
+            .map(|(i, j)| PairSlot {
+                i,
+                j,
+                state: lookup(g.id[i as usize], g.id[j as usize]),
+                ..PairSlot::default()
+            })
+            .collect();
+
+        // Incident lists.
+        let mut offsets = vec![0u32; n + 1];
+        for p in &self.pairs {
+            offsets[p.i as usize + 1] += 1;
+            offsets[p.j as usize + 1] += 1;
+        }
+        for k in 0..n {
+            offsets[k + 1] += offsets[k];
+        }
+        let mut fill = offsets.clone();
+        let mut incident = vec![0u32; self.pairs.len() * 2];
+        for (k, p) in self.pairs.iter().enumerate() {
+            for (side, g) in [(0, p.i), (1, p.j)] {
+                incident[fill[g as usize] as usize] = (k as u32) << 1 | side;
+                fill[g as usize] += 1;
+            }
+        }
+        self.offsets = offsets;
+        self.incident = incident;
+
+        // Walls, by grain then wall index.
+        let mut old_walls: History<(u64, u32), S::V> = self
+            .walls
+            .iter()
+            .filter(|w| w.state != ContactState::default())
+            .filter_map(|w| Some(((*self.ids_built.get(w.grain as usize)?, w.wall), w.state)))
+            .collect();
+        old_walls.sort_unstable_by_key(|e| e.0);
+        let mut walls = Vec::new();
+        let mut wall_offsets = vec![0u32; n + 1];
+        for i in 0..n {
+            for (k, w) in state.walls.iter().enumerate() {
+                if wall_gap(&w.shape, g.x[i]) < g.radius[i] + skin {
+                    let st = old_walls
+                        .binary_search_by_key(&(g.id[i], k as u32), |e| e.0)
+                        .map_or_else(|_| ContactState::default(), |p| old_walls[p].1);
+                    walls.push(WallSlot {
+                        grain: i as u32,
+                        wall: k as u32,
+                        state: st,
+                        ..WallSlot::default()
+                    });
+                }
+            }
+            wall_offsets[i + 1] = walls.len() as u32;
+        }
+        self.walls = walls;
+        self.wall_offsets = wall_offsets;
+
+        self.x_built = g.x.clone();
+        self.wall_anchor_built = state.walls.iter().map(|w| wall_anchor(&w.shape)).collect();
+        self.skin = skin;
+        self.ids_built = g.id.clone();
+        self.builds += 1;
+    }
+}

@@ -1,0 +1,217 @@
+//! The dimension as a type: 2D disks (3 degrees of freedom) and 3D spheres (6), sharing every
+//! kernel. Vectors are glam `DVec2`/`DVec3`; angular quantities are a scalar (the z component)
+//! in 2D and a `DVec3` in 3D; orientation is an angle in 2D and a unit quaternion in 3D.
+
+use glam::{DQuat, DVec2, DVec3};
+use std::fmt::Debug;
+use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
+
+/// Vector operations the kernels need, on `DVec2` and `DVec3`.
+pub trait Vector:
+    Copy
+    + Debug
+    + Default
+    + PartialEq
+    + Send
+    + Sync
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<f64, Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + 'static
+{
+    fn dot(self, o: Self) -> f64;
+    fn length_squared(self) -> f64 {
+        self.dot(self)
+    }
+    fn length(self) -> f64 {
+        self.length_squared().sqrt()
+    }
+    fn is_finite(self) -> bool;
+    /// Minimum-image correction of a separation: every component with a nonzero `period`
+    /// is wrapped into [−period/2, period/2] (`inv` = 1/period, 0 where not periodic).
+    fn min_image(self, period: Self, inv: Self) -> Self;
+}
+
+impl Vector for DVec2 {
+    #[inline]
+    fn dot(self, o: Self) -> f64 {
+        DVec2::dot(self, o)
+    }
+    fn is_finite(self) -> bool {
+        DVec2::is_finite(self)
+    }
+    #[inline]
+    fn min_image(self, period: Self, inv: Self) -> Self {
+        self - period * (self * inv).round()
+    }
+}
+
+impl Vector for DVec3 {
+    #[inline]
+    fn dot(self, o: Self) -> f64 {
+        DVec3::dot(self, o)
+    }
+    fn is_finite(self) -> bool {
+        DVec3::is_finite(self)
+    }
+    #[inline]
+    fn min_image(self, period: Self, inv: Self) -> Self {
+        self - period * (self * inv).round()
+    }
+}
+
+impl Vector for f64 {
+    #[inline]
+    fn dot(self, o: Self) -> f64 {
+        self * o
+    }
+    fn is_finite(self) -> bool {
+        f64::is_finite(self)
+    }
+    fn min_image(self, period: Self, inv: Self) -> Self {
+        self - period * (self * inv).round()
+    }
+}
+
+/// A spatial dimension.
+pub trait Space: Copy + Debug + Default + Send + Sync + 'static {
+    const DIM: usize;
+    /// Position, velocity, force.
+    type V: Vector;
+    /// Angular velocity and torque (z component in 2D).
+    type Ang: Vector;
+    /// Orientation (angle in 2D, unit quaternion in 3D).
+    type Rot: Copy + Debug + Default + PartialEq + Send + Sync + 'static;
+
+    /// Moment of inertia of a grain over m r² (disk 1/2, solid sphere 2/5).
+    const INERTIA_FACTOR: f64;
+
+    fn from_array(a: [f64; 3]) -> Self::V;
+    fn to_array(v: Self::V) -> [f64; 3];
+    fn component(v: Self::V, k: usize) -> f64 {
+        Self::to_array(v)[k]
+    }
+    /// ω × r: velocity of a point at offset r on a body spinning at ω.
+    fn ang_cross(omega: Self::Ang, r: Self::V) -> Self::V;
+    /// r × f: torque of a force f applied at offset r.
+    fn torque(r: Self::V, f: Self::V) -> Self::Ang;
+    fn identity_rot() -> Self::Rot;
+    /// Orientation after spinning at ω for dt.
+    fn rotate(rot: Self::Rot, omega: Self::Ang, dt: f64) -> Self::Rot;
+    /// Orientation as a quaternion (2D: rotation about z), for output.
+    fn rot_quat(rot: Self::Rot) -> [f64; 4];
+    fn ang_array(a: Self::Ang) -> [f64; 3];
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct D2;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct D3;
+
+impl Space for D2 {
+    const DIM: usize = 2;
+    type V = DVec2;
+    type Ang = f64;
+    type Rot = f64;
+    const INERTIA_FACTOR: f64 = 0.5;
+
+    #[inline]
+    fn from_array(a: [f64; 3]) -> DVec2 {
+        DVec2::new(a[0], a[1])
+    }
+    #[inline]
+    fn to_array(v: DVec2) -> [f64; 3] {
+        [v.x, v.y, 0.0]
+    }
+    #[inline]
+    fn ang_cross(omega: f64, r: DVec2) -> DVec2 {
+        DVec2::new(-omega * r.y, omega * r.x)
+    }
+    #[inline]
+    fn torque(r: DVec2, f: DVec2) -> f64 {
+        r.x * f.y - r.y * f.x
+    }
+    fn identity_rot() -> f64 {
+        0.0
+    }
+    #[inline]
+    fn rotate(rot: f64, omega: f64, dt: f64) -> f64 {
+        rot + omega * dt
+    }
+    fn rot_quat(rot: f64) -> [f64; 4] {
+        let q = DQuat::from_rotation_z(rot);
+        [q.w, q.x, q.y, q.z]
+    }
+    fn ang_array(a: f64) -> [f64; 3] {
+        [0.0, 0.0, a]
+    }
+}
+
+impl Space for D3 {
+    const DIM: usize = 3;
+    type V = DVec3;
+    type Ang = DVec3;
+    type Rot = DQuat;
+    const INERTIA_FACTOR: f64 = 0.4;
+
+    #[inline]
+    fn from_array(a: [f64; 3]) -> DVec3 {
+        DVec3::from_array(a)
+    }
+    #[inline]
+    fn to_array(v: DVec3) -> [f64; 3] {
+        v.to_array()
+    }
+    #[inline]
+    fn ang_cross(omega: DVec3, r: DVec3) -> DVec3 {
+        omega.cross(r)
+    }
+    #[inline]
+    fn torque(r: DVec3, f: DVec3) -> DVec3 {
+        r.cross(f)
+    }
+    fn identity_rot() -> DQuat {
+        DQuat::IDENTITY
+    }
+    /// Exact rotation by the angle |ω| dt about ω, renormalized (spheres: ω is constant
+    /// between torques, so this is exact for the step).
+    #[inline]
+    fn rotate(rot: DQuat, omega: DVec3, dt: f64) -> DQuat {
+        let angle = omega.length() * dt;
+        if angle == 0.0 {
+            return rot;
+        }
+        (DQuat::from_axis_angle(omega / omega.length(), angle) * rot).normalize()
+    }
+    fn rot_quat(rot: DQuat) -> [f64; 4] {
+        [rot.w, rot.x, rot.y, rot.z]
+    }
+    fn ang_array(a: DVec3) -> [f64; 3] {
+        a.to_array()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cross_products_agree_between_2d_and_3d() {
+        let (w, r, f) = (1.5, DVec2::new(0.3, -0.7), DVec2::new(2.0, 0.5));
+        let v2 = D2::ang_cross(w, r);
+        let v3 = D3::ang_cross(DVec3::new(0.0, 0.0, w), r.extend(0.0));
+        assert_eq!(v2.extend(0.0), v3);
+        assert_eq!(D2::torque(r, f), D3::torque(r.extend(0.0), f.extend(0.0)).z);
+    }
+
+    #[test]
+    fn quaternion_rotation_turns_by_omega_dt() {
+        let q = D3::rotate(DQuat::IDENTITY, DVec3::new(0.0, 0.0, std::f64::consts::PI), 0.5);
+        let x = q * DVec3::X;
+        assert!((x - DVec3::Y).length() < 1e-12, "{x}");
+    }
+}
