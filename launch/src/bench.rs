@@ -83,6 +83,7 @@ fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64) -> anyhow::Resul
                 external: vec![],
                 out_root: args.out.join("runs"),
                 progress: false,
+                overrides: vec![],
                 announce: false,
             };
             let outcome = run(&opts)?;

@@ -30,6 +30,10 @@ enum Cmd {
         /// No live progress line.
         #[arg(long)]
         quiet: bool,
+        /// Override a scene value before validation, e.g. `--set coupling.substeps=20` or
+        /// `--set body.0.max=[0.04,0.08]` (repeatable; values in TOML syntax).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
     },
     /// Check a scene file and print what a run of it would start.
     Check { scene: PathBuf },
@@ -61,6 +65,7 @@ fn main() -> ExitCode {
             external,
             out,
             quiet,
+            overrides,
         } => {
             let opts = RunOptions {
                 scene_path: scene,
@@ -68,6 +73,7 @@ fn main() -> ExitCode {
                 external,
                 out_root: out,
                 progress: !quiet,
+                overrides,
                 announce: true,
             };
             grains_launch::run::run(&opts).map(|o| {

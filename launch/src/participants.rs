@@ -71,7 +71,7 @@ impl Processes {
     /// Starts `roles` as processes of their own, in their own process group (a terminal's
     /// Ctrl-C reaches the launcher only, which stops the run at a step boundary), with a
     /// parent-death signal so that none outlives a killed launcher.
-    pub fn spawn(roles: &[Role], scene_path: &Path, run_id: &str, connect_timeout: f64) -> anyhow::Result<Self> {
+    pub fn spawn(roles: &[Role], scene_path: &Path, run_id: &str, out_dir: &Path, connect_timeout: f64) -> anyhow::Result<Self> {
         let dir = bin_dir();
         let mut children = Vec::new();
         for &role in roles {
@@ -82,7 +82,9 @@ impl Processes {
                 .arg("--run-id")
                 .arg(run_id)
                 .arg("--connect-timeout")
-                .arg(connect_timeout.to_string());
+                .arg(connect_timeout.to_string())
+                .arg("--out-dir")
+                .arg(out_dir);
             cmd.process_group(0);
             // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
             unsafe {
@@ -156,7 +158,7 @@ pub struct Threads {
 
 impl Threads {
     /// Runs `roles` as threads of this process over the in-process transport `bus`.
-    pub fn spawn(roles: &[Role], scene: &Scene, run_id: &str, bus: &InProc) -> anyhow::Result<Self> {
+    pub fn spawn(roles: &[Role], scene: &Scene, run_id: &str, out_dir: &Path, bus: &InProc) -> anyhow::Result<Self> {
         let mut threads = Vec::new();
         for &role in roles {
             let stop = StopFlag::manual();
@@ -166,6 +168,7 @@ impl Threads {
                 connect_timeout: Some(Duration::from_secs(60)),
                 protocol_version: grains_protocol::PROTOCOL_VERSION,
                 checksums: scene.synthetic.as_ref().is_none_or(|s| s.checksum),
+                out_dir: Some(out_dir.to_path_buf()),
             };
             let (scene, bus) = (scene.clone(), bus.clone());
             let handle = std::thread::Builder::new().name(role.binary().into()).spawn(move || match role {

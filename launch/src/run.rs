@@ -38,6 +38,8 @@ pub struct RunOptions {
     pub out_root: PathBuf,
     /// Live progress on stderr.
     pub progress: bool,
+    /// `--set key=value` overrides of the scene (applied before validation).
+    pub overrides: Vec<String>,
     /// Say on stderr what the run is (id, output directory, participants) and how it ended.
     pub announce: bool,
 }
@@ -115,32 +117,37 @@ pub fn new_run_id() -> String {
 
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
-    let scene = scene::load(&opts.scene_path)?;
-    if scene.synthetic.is_none() {
-        bail!(BadInput(format!(
-            "{}: this build runs [synthetic] test scenes only: the DEM and MPM solvers are not in it yet",
-            scene.path.display()
-        )));
-    }
+    let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
     let roles = scene.participants();
-    for e in &opts.external {
-        if !roles.contains(e) {
+    if scene.synthetic.is_none() {
+        if roles != [Role::Dem] {
             let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
             bail!(BadInput(format!(
-                "--external {e}: the scene has no {e} participant (it runs: {})",
+                "{}: this scene needs {}; this build has the DEM solver only (MPM and coupling come with the next issues): \
+                 give every body model = \"dem\"",
+                scene.path.display(),
                 list.join(", ")
             )));
         }
+        grains_dem_service::check_scene(&scene)?;
+    }
+    for e in &opts.external {
+        if !roles.contains(e) {
+            let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
+            bail!(BadInput(format!("--external {e}: the scene has no {e} participant (it runs: {})", list.join(", "))));
+        }
     }
     if opts.transport == TransportKind::Inproc && !opts.external.is_empty() {
-        bail!(BadInput(
-            "--external needs --transport ipc: an external participant is another process".into()
-        ));
+        bail!(BadInput("--external needs --transport ipc: an external participant is another process".into()));
     }
-    let scene_path = std::fs::canonicalize(&opts.scene_path).with_context(|| format!("resolving {}", opts.scene_path.display()))?;
     let run_id = new_run_id();
     let dir = opts.out_root.join(&scene.name).join(&run_id);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
+    // The exact scene of the run (overrides applied) sits beside its outputs; every
+    // participant reads this copy.
+    let scene_copy = dir.join("scene.toml");
+    write_atomic(&scene_copy, text.as_bytes()).with_context(|| format!("writing {}", scene_copy.display()))?;
+    let scene_path = std::fs::canonicalize(&scene_copy).with_context(|| format!("resolving {}", scene_copy.display()))?;
 
     let started = SystemTime::now();
     let ctx = RunCtx {
@@ -157,7 +164,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
             let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
             let result = supervise(&transport, &ctx, || {
-                Ok(Box::new(Processes::spawn(&spawned, &scene_path, &run_id, external_timeout)?) as Box<dyn Participants>)
+                Ok(Box::new(Processes::spawn(&spawned, &scene_path, &run_id, &dir, external_timeout)?) as Box<dyn Participants>)
             });
             drop(transport);
             ipc::remove_run_files(&run_id);
@@ -166,7 +173,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         TransportKind::Inproc => {
             let bus = InProc::new();
             supervise(&bus, &ctx, || {
-                Ok(Box::new(Threads::spawn(&roles, &scene, &run_id, &bus)?) as Box<dyn Participants>)
+                Ok(Box::new(Threads::spawn(&roles, &scene, &run_id, &dir, &bus)?) as Box<dyn Participants>)
             })?
         }
     };

@@ -65,6 +65,17 @@ pub struct Domain {
     pub max: [f64; 3],
     /// Background grid cell width [m] (MPM grid, rasters, oracle).
     pub cell_size: f64,
+    /// Axes along which the domain wraps around.
+    pub periodic: [bool; 3],
+}
+
+/// How grain contacts dissipate energy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DemDamping {
+    /// Restitution coefficient e of a head-on impact, in (0, 1].
+    Restitution(f64),
+    /// Constant damping coefficient γ_n = γ_t [N s/m] (Chen 2021 Table 1).
+    Viscous(f64),
 }
 
 /// Grain parameters (Yue 2018 §3.2, Chen 2021 §2.1 and Table 1).
@@ -78,8 +89,8 @@ pub struct DemMaterial {
     pub stiffness_normal: f64,
     /// Tangential stiffness k_t [N/m].
     pub stiffness_tangential: f64,
-    /// Normal restitution coefficient e, in (0, 1].
-    pub restitution: f64,
+    /// Normal and tangential damping.
+    pub damping: DemDamping,
     /// Coulomb friction coefficient μ.
     pub friction: f64,
     /// Normal cohesion e_n [N/m] (Chen 2021).
@@ -139,6 +150,8 @@ pub enum WallShape {
     Plane { point: [f64; 3], normal: [f64; 3] },
     /// Material kept inside the box.
     Box { min: [f64; 3], max: [f64; 3] },
+    /// Material kept inside a circle (2D) or a cylinder along z (3D).
+    Drum { center: [f64; 3], radius: f64 },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -146,6 +159,10 @@ pub struct Wall {
     pub shape: WallShape,
     /// Coulomb friction between material and wall.
     pub friction: f64,
+    /// Scripted translation velocity [m/s].
+    pub velocity: [f64; 3],
+    /// Scripted angular velocity of a drum about its axis [rad/s], counter-clockwise positive.
+    pub spin: f64,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -295,6 +312,69 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         }
     };
     from_str(text, path, hash_bytes(&bytes))
+}
+
+/// Reads a scene file, applies `--set key=value` overrides (dotted keys, list entries by
+/// index: `body.0.max=[0.1, 0.2]`, values in TOML syntax) and validates the result. Returns the
+/// scene and the effective text, which is what a run hands to its participants.
+pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, String), SceneError> {
+    let scene = load(path)?; // the file itself must be sound before it is edited
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+        path: path.into(),
+        line_col: None,
+        field: None,
+        message: format!("cannot read the scene file: {e}"),
+    })?;
+    if overrides.is_empty() {
+        return Ok((scene, text));
+    }
+    let err = |field: &str, message: String| SceneError { path: path.into(), line_col: None, field: Some(field.into()), message };
+    let mut doc = toml::Value::Table(text.parse::<toml::Table>().map_err(|e| err("", e.message().to_string()))?);
+    for o in overrides {
+        let Some((key, value)) = o.split_once('=') else {
+            return Err(err(o, format!("--set {o:?}: expected key=value, e.g. coupling.substeps=20")));
+        };
+        let key = key.trim();
+        let value = format!("v = {}", value.trim())
+            .parse::<toml::Table>()
+            .map_err(|e| err(key, format!("--set {o:?}: the value is not TOML: {}", e.message())))?
+            .remove("v")
+            .expect("parsed above");
+        let parts: Vec<&str> = key.split('.').collect();
+        set_path(&mut doc, &parts, value).map_err(|m| err(key, format!("--set {o:?}: {m}")))?;
+    }
+    let text = toml::to_string(&doc).map_err(|e| err("", format!("cannot write the overridden scene: {e}")))?;
+    let scene = from_str(&text, path, hash_bytes(text.as_bytes())).map_err(|mut e| {
+        e.message = format!("{} (after --set {})", e.message, overrides.join(" --set "));
+        e.line_col = None;
+        e
+    })?;
+    Ok((scene, text))
+}
+
+fn set_path(node: &mut toml::Value, parts: &[&str], value: toml::Value) -> Result<(), String> {
+    let Some((first, rest)) = parts.split_first() else { return Err("empty key".into()) };
+    let child = match node {
+        toml::Value::Table(t) => {
+            if rest.is_empty() {
+                t.insert(first.to_string(), value);
+                return Ok(());
+            }
+            t.entry(first.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        }
+        toml::Value::Array(a) => {
+            let n = a.len();
+            let idx: usize = first.parse().map_err(|_| format!("`{first}` must be an index into a list of {n} entries"))?;
+            let child = a.get_mut(idx).ok_or_else(|| format!("index {idx} is out of range: the list has {n} entries"))?;
+            if rest.is_empty() {
+                *child = value;
+                return Ok(());
+            }
+            child
+        }
+        _ => return Err(format!("`{first}` is inside a value, not a table or list")),
+    };
+    set_path(child, rest, value)
 }
 
 /// Validates scene text; `path` is only used in messages.
@@ -522,7 +602,14 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         ));
     }
     let cell_size = positive(ctx, &d.cell_size, "domain.cell_size")?;
-    let domain = Domain { min, max, cell_size };
+    let mut periodic = [false; 3];
+    if let Some(p) = &d.periodic {
+        if p.get_ref().len() != dim {
+            return Err(ctx.err(Some(p.span()), Some("domain.periodic"), format!("expected {dim} booleans, got {}", p.get_ref().len())));
+        }
+        periodic[..dim].copy_from_slice(p.get_ref());
+    }
+    let domain = Domain { min, max, cell_size, periodic };
     let gravity = match &raw.gravity {
         Some(g) => vec3(ctx, dim, g, "gravity")?,
         None => [0.0; 3],
@@ -548,7 +635,16 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                         Some(k) => positive(ctx, k, &f("stiffness_tangential"))?,
                         None => stiffness_normal * 2.0 / 7.0,
                     },
-                    restitution: in_range(ctx, &g.restitution, &f("restitution"), Open(0.0), Closed(1.0))?,
+                    damping: match (&g.restitution, &g.damping) {
+                        (Some(e), None) => DemDamping::Restitution(in_range(ctx, e, &f("restitution"), Open(0.0), Closed(1.0))?),
+                        (None, Some(gm)) => DemDamping::Viscous(in_range(ctx, gm, &f("damping"), Closed(0.0), Bound::None)?),
+                        (Some(e), Some(_)) => {
+                            return Err(ctx.err(Some(e.span()), Some(&f("restitution")), "give either `restitution` or `damping` [N s/m], not both".into()));
+                        }
+                        (None, None) => {
+                            return Err(ctx.err(Some(g.radius.span()), Some(&f("restitution")), "missing: give `restitution` (0 < e <= 1) or `damping` [N s/m]".into()));
+                        }
+                    },
                     friction: in_range(ctx, &g.friction, &f("friction"), Closed(0.0), Bound::None)?,
                     cohesion_normal: non_negative(ctx, &g.cohesion_normal, &f("cohesion_normal"))?,
                     cohesion_tangential: non_negative(ctx, &g.cohesion_tangential, &f("cohesion_tangential"))?,
@@ -661,17 +757,32 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 )?;
                 WallShape::Box { min, max }
             }
+            "drum" => WallShape::Drum {
+                center: vec3(ctx, dim, w.center.as_ref().ok_or_else(|| missing("center"))?, &f("center"))?,
+                radius: positive(ctx, w.radius.as_ref().ok_or_else(|| missing("radius"))?, &f("radius"))?,
+            },
             other => {
                 return Err(ctx.err(
                     Some(w.kind.span()),
                     Some(&f("kind")),
-                    format!("must be \"plane\" or \"box\", got {other:?}"),
+                    format!("must be \"plane\", \"box\" or \"drum\", got {other:?}"),
                 ));
             }
         };
+        if let (Some(spin), false) = (&w.spin, matches!(shape, WallShape::Drum { .. })) {
+            return Err(ctx.err(Some(spin.span()), Some(&f("spin")), "only a \"drum\" wall can spin".into()));
+        }
         walls.push(Wall {
             shape,
             friction: non_negative(ctx, &w.friction, &f("friction"))?,
+            velocity: match &w.velocity {
+                Some(v) => vec3(ctx, dim, v, &f("velocity"))?,
+                None => [0.0; 3],
+            },
+            spin: match &w.spin {
+                Some(sp) => in_range(ctx, sp, &f("spin"), Bound::None, Bound::None)?,
+                None => 0.0,
+            },
         });
     }
 
@@ -942,6 +1053,7 @@ pub mod raw {
         pub min: Spanned<Vec<f64>>,
         pub max: Spanned<Vec<f64>>,
         pub cell_size: Spanned<f64>,
+        pub periodic: Option<Spanned<Vec<bool>>>,
     }
 
     #[derive(Deserialize)]
@@ -960,7 +1072,8 @@ pub mod raw {
         pub radius_std: Option<Spanned<f64>>,
         pub stiffness_normal: Spanned<f64>,
         pub stiffness_tangential: Option<Spanned<f64>>,
-        pub restitution: Spanned<f64>,
+        pub restitution: Option<Spanned<f64>>,
+        pub damping: Option<Spanned<f64>>,
         pub friction: Spanned<f64>,
         pub cohesion_normal: Option<Spanned<f64>>,
         pub cohesion_tangential: Option<Spanned<f64>>,
@@ -996,7 +1109,11 @@ pub mod raw {
         pub normal: Option<Spanned<Vec<f64>>>,
         pub min: Option<Spanned<Vec<f64>>>,
         pub max: Option<Spanned<Vec<f64>>>,
+        pub center: Option<Spanned<Vec<f64>>>,
+        pub radius: Option<Spanned<f64>>,
         pub friction: Option<Spanned<f64>>,
+        pub velocity: Option<Spanned<Vec<f64>>>,
+        pub spin: Option<Spanned<f64>>,
     }
 
     #[derive(Deserialize)]
@@ -1095,6 +1212,22 @@ mpm_nodes = 50
             "synthetic.participants",
             "allowed sets",
         );
+    }
+
+    #[test]
+    fn overrides_edit_tables_and_list_entries() {
+        let dir = std::env::temp_dir().join(format!("grains-scene-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.toml");
+        std::fs::write(&path, GOOD).unwrap();
+        let (s, text) = load_with_overrides(&path, &["run.steps=25".into(), "synthetic.dem_nodes = 7".into()]).unwrap();
+        assert_eq!((s.steps, s.synthetic.as_ref().unwrap().dem_nodes), (25, 7));
+        assert_eq!(s.hash, hash_bytes(text.as_bytes()));
+        let e = load_with_overrides(&path, &["run.steps=-3".into()]).unwrap_err();
+        assert!(e.message.contains("--set"), "{e}");
+        let e = load_with_overrides(&path, &["run.dt.x=1".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("run.dt.x"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

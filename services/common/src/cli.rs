@@ -15,6 +15,9 @@ pub struct CommonArgs {
     /// (used while a run waits for an external participant).
     #[arg(long, default_value_t = 60.0)]
     pub connect_timeout: f64,
+    /// The run's output directory: frames are written under it (none if not given).
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
     /// Test hook: announce this protocol version instead of the one built in, to check that a
     /// run refuses a participant of another version.
     #[arg(long, hide = true)]

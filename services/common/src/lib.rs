@@ -54,6 +54,7 @@ pub fn participant_main(
             connect_timeout: args.connect_timeout(),
             protocol_version: args.claim_protocol_version.unwrap_or(grains_protocol::PROTOCOL_VERSION),
             checksums: scene.synthetic.as_ref().is_none_or(|s| s.checksum),
+            out_dir: args.out_dir.clone(),
         };
         body(&transport, &scene, &opts)
     };

@@ -60,6 +60,8 @@ pub struct ParticipantOptions {
     pub protocol_version: u32,
     /// Compute and verify payload checksums.
     pub checksums: bool,
+    /// The run's output directory (frames go under it), if outputs are wanted.
+    pub out_dir: Option<std::path::PathBuf>,
 }
 
 /// Runs one solver participant to the end of the run.

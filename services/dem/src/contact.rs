@@ -6,11 +6,13 @@
 //!
 //! - Normal: f_n = k_n δ − γ_n v_n along n, *not* clamped at zero, so that the linear
 //!   spring–dashpot gives exactly the restitution its damping was derived from.
-//! - Damping from restitution e: γ = −2 ln e √(m k_n / (π² + ln² e)), with m the **reduced
-//!   mass of the pair** m_i m_j/(m_i + m_j) (the grain's own mass against a wall), which is the
-//!   mass of the two-body oscillator: a head-on impact then rebounds at exactly e. (Yue 2018
-//!   and Chen 2021 write the mean grain mass; for equal grains that is twice the reduced mass,
-//!   which would give a larger e than asked.) γ_t = γ_n (Kamrin & Koval 2014 heuristics).
+//! - Damping, γ_t = γ_n (Kamrin & Koval 2014 heuristics), either from a restitution
+//!   coefficient e: γ = −2 ln e √(m k_n / (π² + ln² e)), with m the **reduced mass of the
+//!   pair** m_i m_j/(m_i + m_j) (the grain's own mass against a wall), which is the mass of the
+//!   two-body oscillator, so a head-on impact rebounds at exactly e (Yue 2018 and Chen 2021
+//!   write the mean grain mass; for equal grains that is twice the reduced mass and gives a
+//!   larger e than asked); or a constant γ [N s/m] as in Chen 2021 Table 1 and LAMMPS
+//!   `granular ... damping velocity`.
 //! - Tangential anchor spring Δs: Δs ← Δs + v_t dt, its normal component projected out;
 //!   f_t = −k_t Δs − γ_t v_t; when |f_t| > μ|f_n| + e_t, f_t is scaled back to the cap and Δs
 //!   is rescaled to match (k_t Δs = −f_t), which is the Coulomb slip of the anchor.
@@ -26,8 +28,8 @@ pub struct ContactParams {
     pub stiffness_normal: f64,
     /// Tangential stiffness k_t [N/m].
     pub stiffness_tangential: f64,
-    /// Normal restitution coefficient e, in (0, 1].
-    pub restitution: f64,
+    /// How contacts dissipate.
+    pub damping: Damping,
     /// Coulomb friction coefficient μ.
     pub friction: f64,
     /// Normal cohesion e_n [N] (the tensile force a bond holds).
@@ -36,10 +38,43 @@ pub struct ContactParams {
     pub cohesion_tangential: f64,
 }
 
+/// Normal (and tangential) damping of a contact.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Damping {
+    /// From the restitution coefficient e ∈ (0, 1] and the pair's reduced mass.
+    Restitution(f64),
+    /// A constant coefficient γ [N s/m].
+    Viscous(f64),
+}
+
 impl ContactParams {
-    /// γ / √m: the damping coefficient of a pair of reduced mass m is `damping_factor * √m`.
+    /// Damping coefficient γ [N s/m] of a pair of reduced mass `m_red` [kg].
+    #[inline]
+    pub fn gamma(&self, factor: f64, m_red: f64) -> f64 {
+        match self.damping {
+            Damping::Restitution(_) => factor * m_red.sqrt(),
+            Damping::Viscous(g) => g,
+        }
+    }
+
+    /// The mass-independent part of γ, computed once per material: γ/√m for restitution.
     pub fn damping_factor(&self) -> f64 {
-        damping_factor(self.restitution, self.stiffness_normal)
+        match self.damping {
+            Damping::Restitution(e) => damping_factor(e, self.stiffness_normal),
+            Damping::Viscous(_) => 0.0,
+        }
+    }
+
+    /// Restitution of a head-on impact of a pair of reduced mass `m_red` (inverts the
+    /// formula for viscous damping; 0 when overdamped).
+    pub fn restitution(&self, m_red: f64) -> f64 {
+        match self.damping {
+            Damping::Restitution(e) => e,
+            Damping::Viscous(g) => {
+                let zeta = g / (2.0 * (self.stiffness_normal * m_red).sqrt());
+                if zeta >= 1.0 { 0.0 } else { (-std::f64::consts::PI * zeta / (1.0 - zeta * zeta).sqrt()).exp() }
+            }
+        }
     }
 }
 
@@ -131,7 +166,7 @@ mod tests {
         ContactParams {
             stiffness_normal: 1e5,
             stiffness_tangential: 5e4,
-            restitution: 0.5,
+            damping: Damping::Restitution(0.5),
             friction: mu,
             cohesion_normal: 0.0,
             cohesion_tangential: 0.0,

@@ -190,7 +190,7 @@ impl<S: Space> DemPipeline<S> {
                 let mat = g.material[i] as usize;
                 let scale = 0.5 * (g.scale[i] + g.scale[j]);
                 let m_red = reduced_mass(mass_or_inf(g, i), mass_or_inf(g, j));
-                let gamma = damping[mat] * m_red.sqrt() * scale;
+                let gamma = materials[mat].gamma(damping[mat], m_red) * scale;
                 let c = contact_force::<S>(&materials[mat], r_sum - dist, n, v_rel, gamma, scale, dt, &mut p.state);
                 p.force = c.force;
                 p.couple = S::torque(n, c.force);
@@ -228,7 +228,7 @@ impl<S: Space> DemPipeline<S> {
                 let mut params = materials[mat];
                 params.friction = wall.friction;
                 let scale = g.scale[i];
-                let gamma = damping[mat] * g.mass[i].sqrt() * scale;
+                let gamma = materials[mat].gamma(damping[mat], mass_or_inf(g, i)) * scale;
                 let c = contact_force::<S>(&params, ri - gap, n, v_rel, gamma, scale, dt, &mut w.state);
                 w.force = c.force;
                 w.couple = S::torque(n, c.force);
@@ -348,8 +348,8 @@ fn mass_or_inf<S: Space>(g: &crate::state::Grains<S>, i: usize) -> f64 {
 pub fn critical_time_step(params: &ContactParams, min_mass: f64) -> f64 {
     let m_red = 0.5 * min_mass;
     let omega = (params.stiffness_normal / m_red).sqrt();
-    let ln_e = params.restitution.ln();
-    let zeta = -ln_e / (std::f64::consts::PI.powi(2) + ln_e * ln_e).sqrt();
+    let gamma = params.gamma(params.damping_factor(), m_red);
+    let zeta = gamma / (2.0 * (params.stiffness_normal * m_red).sqrt());
     2.0 / omega * ((1.0 + zeta * zeta).sqrt() - zeta)
 }
 

@@ -1,7 +1,7 @@
 //! DEM against analytic answers (issue 3 "must show"). Each test names its reference.
 
 use glam::{DVec2, DVec3};
-use grains_dem::contact::ContactParams;
+use grains_dem::contact::{ContactParams, Damping};
 use grains_dem::pipeline::{DemPipeline, critical_time_step};
 use grains_dem::space::{D2, D3, Space, Vector};
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
@@ -14,7 +14,7 @@ fn params(e: f64, mu: f64) -> ContactParams {
     ContactParams {
         stiffness_normal: KN,
         stiffness_tangential: 0.5 * KN,
-        restitution: e,
+        damping: Damping::Restitution(e),
         friction: mu,
         cohesion_normal: 0.0,
         cohesion_tangential: 0.0,

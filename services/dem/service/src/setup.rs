@@ -1,0 +1,139 @@
+//! Scene → DEM state: the only place where the scene file meets the DEM library.
+
+use grains_dem::contact::{ContactParams, Damping};
+use grains_dem::packing::{Rng, lattice_in_box, radius};
+use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
+use grains_dem::space::{Space, Vector};
+use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_protocol::scene::{DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
+
+/// DEM step length of a scene: the macro-step over the substeps.
+pub fn dem_dt(scene: &Scene) -> f64 {
+    scene.dt / scene.coupling.substeps as f64
+}
+
+fn contact_params(m: &DemMaterial) -> ContactParams {
+    ContactParams {
+        stiffness_normal: m.stiffness_normal,
+        stiffness_tangential: m.stiffness_tangential,
+        damping: match m.damping {
+            DemDamping::Restitution(e) => Damping::Restitution(e),
+            DemDamping::Viscous(g) => Damping::Viscous(g),
+        },
+        friction: m.friction,
+        cohesion_normal: m.cohesion_normal,
+        cohesion_tangential: m.cohesion_tangential,
+    }
+}
+
+/// Smallest grain radius a material can produce (radii are clamped to mean ± 2σ).
+fn min_radius(m: &DemMaterial) -> f64 {
+    (m.radius - 2.0 * m.radius_std).max(0.05 * m.radius)
+}
+
+fn grain_mass(dim: usize, r: f64, density: f64) -> f64 {
+    if dim == 2 { density * std::f64::consts::PI * r * r } else { density * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3) }
+}
+
+/// Refuses a DEM step above the safe fraction of the critical step of any DEM material the
+/// scene uses, with both numbers and what they come from.
+pub fn check_time_step(scene: &Scene) -> Result<(), String> {
+    let dt = dem_dt(scene);
+    for body in scene.bodies.iter().filter(|b| matches!(b.model, Model::Dem | Model::Hybrid)) {
+        let mat = &scene.materials[body.material];
+        let Some(dem) = &mat.dem else { continue };
+        let m_min = grain_mass(scene.dim(), min_radius(dem), mat.density);
+        let critical = critical_time_step(&contact_params(dem), m_min);
+        if dt > SAFE_FRACTION * critical {
+            return Err(format!(
+                "{}: the DEM step run.dt / coupling.substeps = {dt:.3e} s is above the stable limit for material `{}`: \
+                 critical step {critical:.3e} s (k_n = {:.4e} N/m, smallest grain mass {m_min:.4e} kg), allowed at most {:.0}% of it = {:.3e} s; \
+                 lower run.dt or raise coupling.substeps",
+                scene.path.display(),
+                mat.name,
+                dem.stiffness_normal,
+                SAFE_FRACTION * 100.0,
+                SAFE_FRACTION * critical
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Builds the DEM state of a scene: grains of every `dem` body on a jittered lattice (a
+/// loose packing that gravity settles), walls, domain. Deterministic from the scene's seed.
+pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
+    let dim = scene.dim();
+    let mut materials = Vec::new();
+    let mut material_index = vec![u32::MAX; scene.materials.len()];
+    for (k, m) in scene.materials.iter().enumerate() {
+        if let Some(dem) = &m.dem {
+            material_index[k] = materials.len() as u32;
+            materials.push(contact_params(dem));
+        }
+    }
+    let mean_diameter = scene.materials.iter().filter_map(|m| m.dem.as_ref()).map(|d| 2.0 * d.radius).fold(0.0, f64::max);
+    let mut state = DemState::<S> {
+        grains: Grains::default(),
+        walls: Vec::new(),
+        params: DemParams {
+            materials,
+            gravity: S::from_array(scene.gravity),
+            domain: Domain { min: scene.domain.min, max: scene.domain.max, periodic: scene.domain.periodic },
+            // LAMMPS-like skin of a tenth of a diameter: rebuilds every few tens of steps.
+            skin: 0.1 * mean_diameter,
+        },
+        time: 0.0,
+    };
+    let mut rng = Rng::new(scene.seed);
+    let mut next_id = 0u64;
+    for body in scene.bodies.iter().filter(|b| b.model == Model::Dem) {
+        let mat = &scene.materials[body.material];
+        let Some(dem) = &mat.dem else { continue };
+        let r_max = dem.radius + 2.0 * dem.radius_std;
+        let spacing = 2.0 * r_max * 1.02;
+        let (lo, hi, ball) = match body.shape {
+            Shape::Box { min, max } => (min, max, None),
+            Shape::Ball { center, radius } => {
+                let mut lo = center;
+                let mut hi = center;
+                for k in 0..dim {
+                    lo[k] -= radius;
+                    hi[k] += radius;
+                }
+                (lo, hi, Some((S::from_array(center), radius)))
+            }
+        };
+        for x in lattice_in_box::<S>(lo, hi, spacing, r_max * 1.01, 0.01 * dem.radius, &mut rng) {
+            if let Some((c, big_r)) = ball
+                && (x - c).length() > big_r - r_max
+            {
+                continue;
+            }
+            let r = radius(&mut rng, dem.radius, dem.radius_std);
+            state.grains.push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
+            next_id += 1;
+        }
+    }
+    for w in &scene.walls {
+        let mut add = |mut wall: Wall<S>| {
+            wall.velocity = S::from_array(w.velocity);
+            wall.spin = w.spin;
+            state.walls.push(wall);
+        };
+        match w.shape {
+            WallShape::Plane { point, normal } => add(Wall::plane(S::from_array(point), S::from_array(normal), w.friction)),
+            WallShape::Box { min, max } => {
+                for k in 0..dim {
+                    let mut n = [0.0; 3];
+                    n[k] = 1.0;
+                    add(Wall::plane(S::from_array(min), S::from_array(n), w.friction));
+                    n[k] = -1.0;
+                    add(Wall::plane(S::from_array(max), S::from_array(n), w.friction));
+                }
+            }
+            WallShape::Drum { center, radius } => add(Wall::drum(S::from_array(center), radius, w.friction)),
+        }
+    }
+    state
+}

@@ -1,0 +1,118 @@
+//! The DEM behind the participant loop's [`Solver`] trait.
+
+use crate::frames::FrameWriter;
+use anyhow::bail;
+use grains_dem::pipeline::DemPipeline;
+use grains_dem::space::{Space, Vector};
+use grains_dem::state::{DemState, WallShape};
+use grains_protocol::scene::Scene;
+use grains_protocol::wire::{NodeVelocity, RasterNode};
+use grains_service::solver::{Solver, SolverReport, StepWindow};
+
+pub struct DemSolver<S: Space> {
+    pub state: DemState<S>,
+    pub pipeline: DemPipeline<S>,
+    substeps: u32,
+    frames: Option<(FrameWriter, u64)>,
+    /// Kinetic energy above which the run is declared runaway [J].
+    energy_bound: f64,
+}
+
+impl<S: Space> DemSolver<S> {
+    pub fn new(scene: &Scene, state: DemState<S>, frames: Option<FrameWriter>) -> anyhow::Result<Self> {
+        let pipeline = DemPipeline::new(scene.threads as usize)?;
+        let energy_bound = runaway_bound(scene, &state);
+        let mut solver = DemSolver {
+            state,
+            pipeline,
+            substeps: scene.coupling.substeps,
+            frames: frames.filter(|_| scene.output.frames_every > 0).map(|f| (f, scene.output.frames_every)),
+            energy_bound,
+        };
+        if let Some((f, _)) = &mut solver.frames {
+            f.write(0, &solver.state, &solver.pipeline)?;
+        }
+        Ok(solver)
+    }
+
+    /// NaN and runaway energy, with the step and the likely cause.
+    fn check(&self, step: u64, dt: f64) -> anyhow::Result<()> {
+        if let Some(id) = DemPipeline::first_non_finite(&self.state) {
+            bail!(
+                "DEM step {step} (t = {:.6e} s): grain {id} has a non-finite position or velocity; likely cause: a time step too large for the \
+                 stiffness and the lightest grain (DEM step {dt:.3e} s), or grains created overlapping",
+                self.state.time
+            );
+        }
+        let ke = DemPipeline::kinetic_energy(&self.state);
+        if ke > self.energy_bound {
+            bail!(
+                "DEM step {step} (t = {:.6e} s): kinetic energy {ke:.4e} J exceeds {:.4e} J, far more than gravity and the walls can supply \
+                 (runaway); likely cause: a time step too large for the stiffness (DEM step {dt:.3e} s), or grains created overlapping",
+                self.state.time,
+                self.energy_bound
+            );
+        }
+        Ok(())
+    }
+}
+
+/// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
+/// energy every grain would have at the fastest wall's speed): a run that exceeds it is
+/// blowing up, not flowing.
+fn runaway_bound<S: Space>(scene: &Scene, state: &DemState<S>) -> f64 {
+    let g = &state.grains;
+    let mass: f64 = g.mass.iter().sum();
+    let extent = (0..scene.dim()).map(|k| scene.domain.max[k] - scene.domain.min[k]).fold(0.0, f64::max);
+    let g_norm = scene.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let wall_speed = state
+        .walls
+        .iter()
+        .map(|w| {
+            let spin = match w.shape {
+                WallShape::Drum { radius, .. } => w.spin.abs() * radius,
+                WallShape::Plane { .. } => 0.0,
+            };
+            w.velocity.length() + spin
+        })
+        .fold(0.0, f64::max);
+    let bound = DemPipeline::kinetic_energy(state) + mass * g_norm * extent + 0.5 * mass * wall_speed * wall_speed;
+    100.0 * bound.max(f64::MIN_POSITIVE)
+}
+
+impl<S: Space> Solver for DemSolver<S> {
+    fn predict(&mut self, _window: &StepWindow) -> anyhow::Result<usize> {
+        bail!("the DEM side of a coupled run (rasterized predicted momentum, Yue 2018 Alg. 4) is not in this build")
+    }
+
+    fn write_raster(&mut self, _window: &StepWindow, _out: &mut [RasterNode]) {}
+
+    fn finish(&mut self, _window: &StepWindow, _velocities: &[NodeVelocity]) -> anyhow::Result<()> {
+        bail!("the DEM side of a coupled run is not in this build")
+    }
+
+    fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
+        let dt = window.dt / self.substeps as f64;
+        self.pipeline.run(&mut self.state, dt, self.substeps as usize);
+        self.check(window.step, dt)?;
+        if let Some((f, every)) = &mut self.frames
+            && window.step.is_multiple_of(*every)
+        {
+            f.write(window.step, &self.state, &self.pipeline)?;
+        }
+        Ok(())
+    }
+
+    fn report(&self) -> SolverReport {
+        let g = &self.state.grains;
+        let p = S::to_array(DemPipeline::momentum(&self.state));
+        SolverReport {
+            n_items: g.len() as u64,
+            n_nodes: 0,
+            mass: g.mass.iter().zip(&g.scale).map(|(m, s)| m * s).sum(),
+            momentum: p,
+            kinetic_energy: DemPipeline::kinetic_energy(&self.state),
+            checksum: 0,
+        }
+    }
+}
