@@ -134,11 +134,16 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     for e in &opts.external {
         if !roles.contains(e) {
             let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
-            bail!(BadInput(format!("--external {e}: the scene has no {e} participant (it runs: {})", list.join(", "))));
+            bail!(BadInput(format!(
+                "--external {e}: the scene has no {e} participant (it runs: {})",
+                list.join(", ")
+            )));
         }
     }
     if opts.transport == TransportKind::Inproc && !opts.external.is_empty() {
-        bail!(BadInput("--external needs --transport ipc: an external participant is another process".into()));
+        bail!(BadInput(
+            "--external needs --transport ipc: an external participant is another process".into()
+        ));
     }
     let run_id = new_run_id();
     let dir = opts.out_root.join(&scene.name).join(&run_id);

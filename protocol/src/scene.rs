@@ -152,6 +152,8 @@ pub enum WallShape {
     Box { min: [f64; 3], max: [f64; 3] },
     /// Material kept inside a circle (2D) or a cylinder along z (3D).
     Drum { center: [f64; 3], radius: f64 },
+    /// A line segment material cannot cross (silo bottoms, hoppers; a thin rod in 3D).
+    Segment { from: [f64; 3], to: [f64; 3] },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -328,7 +330,12 @@ pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, 
     if overrides.is_empty() {
         return Ok((scene, text));
     }
-    let err = |field: &str, message: String| SceneError { path: path.into(), line_col: None, field: Some(field.into()), message };
+    let err = |field: &str, message: String| SceneError {
+        path: path.into(),
+        line_col: None,
+        field: Some(field.into()),
+        message,
+    };
     let mut doc = toml::Value::Table(text.parse::<toml::Table>().map_err(|e| err("", e.message().to_string()))?);
     for o in overrides {
         let Some((key, value)) = o.split_once('=') else {
@@ -353,7 +360,9 @@ pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, 
 }
 
 fn set_path(node: &mut toml::Value, parts: &[&str], value: toml::Value) -> Result<(), String> {
-    let Some((first, rest)) = parts.split_first() else { return Err("empty key".into()) };
+    let Some((first, rest)) = parts.split_first() else {
+        return Err("empty key".into());
+    };
     let child = match node {
         toml::Value::Table(t) => {
             if rest.is_empty() {
@@ -364,8 +373,12 @@ fn set_path(node: &mut toml::Value, parts: &[&str], value: toml::Value) -> Resul
         }
         toml::Value::Array(a) => {
             let n = a.len();
-            let idx: usize = first.parse().map_err(|_| format!("`{first}` must be an index into a list of {n} entries"))?;
-            let child = a.get_mut(idx).ok_or_else(|| format!("index {idx} is out of range: the list has {n} entries"))?;
+            let idx: usize = first
+                .parse()
+                .map_err(|_| format!("`{first}` must be an index into a list of {n} entries"))?;
+            let child = a
+                .get_mut(idx)
+                .ok_or_else(|| format!("index {idx} is out of range: the list has {n} entries"))?;
             if rest.is_empty() {
                 *child = value;
                 return Ok(());
@@ -605,11 +618,20 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
     let mut periodic = [false; 3];
     if let Some(p) = &d.periodic {
         if p.get_ref().len() != dim {
-            return Err(ctx.err(Some(p.span()), Some("domain.periodic"), format!("expected {dim} booleans, got {}", p.get_ref().len())));
+            return Err(ctx.err(
+                Some(p.span()),
+                Some("domain.periodic"),
+                format!("expected {dim} booleans, got {}", p.get_ref().len()),
+            ));
         }
         periodic[..dim].copy_from_slice(p.get_ref());
     }
-    let domain = Domain { min, max, cell_size, periodic };
+    let domain = Domain {
+        min,
+        max,
+        cell_size,
+        periodic,
+    };
     let gravity = match &raw.gravity {
         Some(g) => vec3(ctx, dim, g, "gravity")?,
         None => [0.0; 3],
@@ -639,10 +661,18 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                         (Some(e), None) => DemDamping::Restitution(in_range(ctx, e, &f("restitution"), Open(0.0), Closed(1.0))?),
                         (None, Some(gm)) => DemDamping::Viscous(in_range(ctx, gm, &f("damping"), Closed(0.0), Bound::None)?),
                         (Some(e), Some(_)) => {
-                            return Err(ctx.err(Some(e.span()), Some(&f("restitution")), "give either `restitution` or `damping` [N s/m], not both".into()));
+                            return Err(ctx.err(
+                                Some(e.span()),
+                                Some(&f("restitution")),
+                                "give either `restitution` or `damping` [N s/m], not both".into(),
+                            ));
                         }
                         (None, None) => {
-                            return Err(ctx.err(Some(g.radius.span()), Some(&f("restitution")), "missing: give `restitution` (0 < e <= 1) or `damping` [N s/m]".into()));
+                            return Err(ctx.err(
+                                Some(g.radius.span()),
+                                Some(&f("restitution")),
+                                "missing: give `restitution` (0 < e <= 1) or `damping` [N s/m]".into(),
+                            ));
                         }
                     },
                     friction: in_range(ctx, &g.friction, &f("friction"), Closed(0.0), Bound::None)?,
@@ -761,11 +791,15 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 center: vec3(ctx, dim, w.center.as_ref().ok_or_else(|| missing("center"))?, &f("center"))?,
                 radius: positive(ctx, w.radius.as_ref().ok_or_else(|| missing("radius"))?, &f("radius"))?,
             },
+            "segment" => WallShape::Segment {
+                from: vec3(ctx, dim, w.from.as_ref().ok_or_else(|| missing("from"))?, &f("from"))?,
+                to: vec3(ctx, dim, w.to.as_ref().ok_or_else(|| missing("to"))?, &f("to"))?,
+            },
             other => {
                 return Err(ctx.err(
                     Some(w.kind.span()),
                     Some(&f("kind")),
-                    format!("must be \"plane\", \"box\" or \"drum\", got {other:?}"),
+                    format!("must be \"plane\", \"box\", \"drum\" or \"segment\", got {other:?}"),
                 ));
             }
         };
@@ -1111,6 +1145,8 @@ pub mod raw {
         pub max: Option<Spanned<Vec<f64>>>,
         pub center: Option<Spanned<Vec<f64>>>,
         pub radius: Option<Spanned<f64>>,
+        pub from: Option<Spanned<Vec<f64>>>,
+        pub to: Option<Spanned<Vec<f64>>>,
         pub friction: Option<Spanned<f64>>,
         pub velocity: Option<Spanned<Vec<f64>>>,
         pub spin: Option<Spanned<f64>>,

@@ -244,3 +244,55 @@ fn ctrl_c_stops_every_participant_cleanly_and_keeps_the_outputs() {
     assert!(grains_transport::ipc::run_files(&run_id).is_empty());
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+#[test]
+fn a_dem_scene_starts_only_the_dem_and_threads_give_the_same_physics() {
+    let _machine = machine();
+    let out = out_dir("dem");
+    let out_s = out.to_str().unwrap();
+    let scene = "tests/scenes/dem_small_2d.toml";
+    let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    let parts = summary(&dir)["participants"].clone();
+    let roles: Vec<&str> = parts.as_array().unwrap().iter().map(|p| p["role"].as_str().unwrap()).collect();
+    assert_eq!(roles, ["dem"], "a DEM-only scene starts no MPM, coupler or oracle");
+    // Frames at steps 0, 20 and 40, listed in the ParaView collection, one point per grain.
+    let grains: u64 = column(&dir, "dem_items")[0].parse().unwrap();
+    assert!(grains > 200, "{grains} grains");
+    let pvd = std::fs::read_to_string(dir.join("frames/grains.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
+    let vtu = std::fs::read_to_string(dir.join("frames/grains_00000040.vtu")).unwrap();
+    assert!(vtu.contains(&format!("NumberOfPoints=\"{grains}\"")) && vtu.trim_end().ends_with("</VTKFile>"));
+    for name in ["\"id\"", "\"radius\"", "\"velocity\"", "\"angular_velocity\"", "\"contacts\""] {
+        assert!(vtu.contains(name), "frame lacks {name}");
+    }
+    // Settling under gravity: the grains gain downward momentum from rest.
+    let py: Vec<f64> = column(&dir, "dem_py").iter().map(|v| v.parse().unwrap()).collect();
+    assert!(py[5] < 0.0, "{py:?}");
+
+    let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
+    assert!(status.success(), "{err}");
+    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(read(&dir), read(&run_dir(&err)));
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn a_time_step_above_the_stable_limit_is_refused_before_the_run() {
+    let out = out_dir("unstable");
+    let (status, err) = run_to_end(&[
+        "run",
+        "tests/scenes/dem_small_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "run.dt=1e-3",
+    ]);
+    assert_eq!(status.code(), Some(2), "{err}");
+    for needle in ["dem_small_2d.toml", "run.dt", "critical step", "allowed at most"] {
+        assert!(err.contains(needle), "expected {needle:?} in: {err}");
+    }
+    assert!(!out.join("dem_small_2d").exists(), "nothing may run or be written");
+    std::fs::remove_dir_all(&out).unwrap();
+}

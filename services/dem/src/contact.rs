@@ -72,7 +72,11 @@ impl ContactParams {
             Damping::Restitution(e) => e,
             Damping::Viscous(g) => {
                 let zeta = g / (2.0 * (self.stiffness_normal * m_red).sqrt());
-                if zeta >= 1.0 { 0.0 } else { (-std::f64::consts::PI * zeta / (1.0 - zeta * zeta).sqrt()).exp() }
+                if zeta >= 1.0 {
+                    0.0
+                } else {
+                    (-std::f64::consts::PI * zeta / (1.0 - zeta * zeta).sqrt()).exp()
+                }
             }
         }
     }

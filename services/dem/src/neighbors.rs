@@ -80,18 +80,37 @@ fn wall_anchor<S: Space>(shape: &WallShape<S>) -> S::V {
     match *shape {
         WallShape::Plane { point, .. } => point,
         WallShape::Drum { center, .. } => center,
+        WallShape::Segment { a, .. } => a,
     }
 }
 
 /// Distance from a grain centre to a wall's surface, positive on the grains' side.
 #[inline]
 pub fn wall_gap<S: Space>(shape: &WallShape<S>, x: S::V) -> f64 {
+    wall_geometry(shape, x, S::V::default(), 0.0).0
+}
+
+/// Gap from a grain centre at `x` to the wall surface (positive on the grains' side), the
+/// unit normal from the wall to the grain, and the wall's surface velocity at the contact,
+/// for a wall translating at `velocity` (and a drum spinning at `spin` about z).
+#[inline]
+pub fn wall_geometry<S: Space>(shape: &WallShape<S>, x: S::V, velocity: S::V, spin: f64) -> (f64, S::V, S::V) {
     match *shape {
-        WallShape::Plane { point, normal } => (x - point).dot(normal),
+        WallShape::Plane { point, normal } => ((x - point).dot(normal), normal, velocity),
         WallShape::Drum { center, radius } => {
             let mut d = S::to_array(x - center);
             d[2] = 0.0;
-            radius - (d[0] * d[0] + d[1] * d[1]).sqrt()
+            let len = (d[0] * d[0] + d[1] * d[1]).sqrt().max(1e-300);
+            let n = S::from_array([-d[0] / len, -d[1] / len, 0.0]);
+            let arm = [d[0] / len * radius, d[1] / len * radius];
+            (radius - len, n, velocity + S::from_array([-spin * arm[1], spin * arm[0], 0.0]))
+        }
+        WallShape::Segment { a, b } => {
+            let ab = b - a;
+            let t = ((x - a).dot(ab) / ab.length_squared().max(1e-300)).clamp(0.0, 1.0);
+            let d = x - (a + ab * t);
+            let len = d.length().max(1e-300);
+            (len, d * (1.0 / len), velocity)
         }
     }
 }

@@ -12,7 +12,7 @@
 //! passed in.
 
 use crate::contact::{ContactParams, contact_force, reduced_mass};
-use crate::neighbors::{NeighborList, periods, separation, wall_gap};
+use crate::neighbors::{NeighborList, periods, separation, wall_gap, wall_geometry};
 use crate::space::{Space, Vector};
 use crate::state::{DemState, WallShape};
 use rayon::prelude::*;
@@ -160,6 +160,10 @@ impl<S: Space> DemPipeline<S> {
             match &mut w.shape {
                 WallShape::Plane { point, .. } => *point += w.velocity * dt,
                 WallShape::Drum { center, .. } => *center += w.velocity * dt,
+                WallShape::Segment { a, b } => {
+                    *a += w.velocity * dt;
+                    *b += w.velocity * dt;
+                }
             }
         }
     }
@@ -203,26 +207,13 @@ impl<S: Space> DemPipeline<S> {
             for w in chunk {
                 let i = w.grain as usize;
                 let wall = &walls[w.wall as usize];
-                let gap = wall_gap(&wall.shape, g.x[i]);
+                let (gap, n, v_wall) = wall_geometry(&wall.shape, g.x[i], wall.velocity, wall.spin);
                 let ri = g.radius[i];
                 if gap >= ri && !w.state.bonded {
                     w.state = Default::default();
                     w.active = false;
                     continue;
                 }
-                // Unit normal from the wall to the grain, and the wall's velocity at the contact.
-                let (n, v_wall) = match wall.shape {
-                    WallShape::Plane { normal, .. } => (normal, wall.velocity),
-                    WallShape::Drum { center, radius } => {
-                        let mut d = S::to_array(g.x[i] - center);
-                        d[2] = 0.0;
-                        let len = (d[0] * d[0] + d[1] * d[1]).sqrt().max(1e-300);
-                        let n = S::from_array([-d[0] / len, -d[1] / len, 0.0]);
-                        let arm = [d[0] / len * radius, d[1] / len * radius];
-                        let spin = S::from_array([-wall.spin * arm[1], wall.spin * arm[0], 0.0]);
-                        (n, wall.velocity + spin)
-                    }
-                };
                 let v_rel = g.v[i] + S::ang_cross(g.omega[i], n * -ri) - v_wall;
                 let mat = g.material[i] as usize;
                 let mut params = materials[mat];

@@ -71,6 +71,9 @@ pub enum WallShape<S: Space> {
     Plane { point: S::V, normal: S::V },
     /// Inside of a circle (2D) or of a cylinder along z (3D): grains stay inside.
     Drum { center: S::V, radius: f64 },
+    /// A line segment from `a` to `b` that grains cannot cross (in 3D, a thin rod): the
+    /// pieces of silo bottoms and hoppers.
+    Segment { a: S::V, b: S::V },
 }
 
 /// A wall, possibly scripted: it translates at `velocity` and a drum spins at `spin` about
@@ -93,6 +96,16 @@ impl<S: Space> Wall<S> {
         let normal = normal * (1.0 / crate::space::Vector::length(normal));
         Wall {
             shape: WallShape::Plane { point, normal },
+            velocity: S::V::default(),
+            spin: 0.0,
+            friction,
+            load: S::V::default(),
+        }
+    }
+
+    pub fn segment(a: S::V, b: S::V, friction: f64) -> Self {
+        Wall {
+            shape: WallShape::Segment { a, b },
             velocity: S::V::default(),
             spin: 0.0,
             friction,

@@ -16,7 +16,12 @@ use grains_transport::Transport;
 /// Checks what the DEM needs of a scene before any process starts (the time step against
 /// the critical one); the error is a scene error (exit code 2).
 pub fn check_scene(scene: &Scene) -> Result<(), SceneError> {
-    setup::check_time_step(scene).map_err(|message| SceneError { path: scene.path.clone(), line_col: None, field: Some("run.dt".into()), message })
+    setup::check_time_step(scene).map_err(|message| SceneError {
+        path: scene.path.clone(),
+        line_col: None,
+        field: Some("run.dt".into()),
+        message,
+    })
 }
 
 /// Runs the DEM participant of `scene` over `transport` to the end of the run.

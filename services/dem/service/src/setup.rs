@@ -32,7 +32,11 @@ fn min_radius(m: &DemMaterial) -> f64 {
 }
 
 fn grain_mass(dim: usize, r: f64, density: f64) -> f64 {
-    if dim == 2 { density * std::f64::consts::PI * r * r } else { density * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3) }
+    if dim == 2 {
+        density * std::f64::consts::PI * r * r
+    } else {
+        density * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
+    }
 }
 
 /// Refuses a DEM step above the safe fraction of the critical step of any DEM material the
@@ -46,10 +50,9 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
         let critical = critical_time_step(&contact_params(dem), m_min);
         if dt > SAFE_FRACTION * critical {
             return Err(format!(
-                "{}: the DEM step run.dt / coupling.substeps = {dt:.3e} s is above the stable limit for material `{}`: \
+                "the DEM step run.dt / coupling.substeps = {dt:.3e} s is above the stable limit for material `{}`: \
                  critical step {critical:.3e} s (k_n = {:.4e} N/m, smallest grain mass {m_min:.4e} kg), allowed at most {:.0}% of it = {:.3e} s; \
                  lower run.dt or raise coupling.substeps",
-                scene.path.display(),
                 mat.name,
                 dem.stiffness_normal,
                 SAFE_FRACTION * 100.0,
@@ -72,14 +75,23 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
             materials.push(contact_params(dem));
         }
     }
-    let mean_diameter = scene.materials.iter().filter_map(|m| m.dem.as_ref()).map(|d| 2.0 * d.radius).fold(0.0, f64::max);
+    let mean_diameter = scene
+        .materials
+        .iter()
+        .filter_map(|m| m.dem.as_ref())
+        .map(|d| 2.0 * d.radius)
+        .fold(0.0, f64::max);
     let mut state = DemState::<S> {
         grains: Grains::default(),
         walls: Vec::new(),
         params: DemParams {
             materials,
             gravity: S::from_array(scene.gravity),
-            domain: Domain { min: scene.domain.min, max: scene.domain.max, periodic: scene.domain.periodic },
+            domain: Domain {
+                min: scene.domain.min,
+                max: scene.domain.max,
+                periodic: scene.domain.periodic,
+            },
             // LAMMPS-like skin of a tenth of a diameter: rebuilds every few tens of steps.
             skin: 0.1 * mean_diameter,
         },
@@ -111,7 +123,9 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
                 continue;
             }
             let r = radius(&mut rng, dem.radius, dem.radius_std);
-            state.grains.push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
+            state
+                .grains
+                .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
             next_id += 1;
         }
     }
@@ -133,6 +147,23 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
                 }
             }
             WallShape::Drum { center, radius } => add(Wall::drum(S::from_array(center), radius, w.friction)),
+            WallShape::Segment { from, to } => add(Wall::segment(S::from_array(from), S::from_array(to), w.friction)),
+        }
+    }
+    // Lattice sites a wall cuts through (a drum's curve, a hopper's slope) stay empty.
+    let keep: Vec<bool> = (0..state.grains.len())
+        .map(|i| {
+            state
+                .walls
+                .iter()
+                .all(|w| grains_dem::neighbors::wall_gap(&w.shape, state.grains.x[i]) > state.grains.radius[i])
+        })
+        .collect();
+    if keep.iter().any(|k| !k) {
+        let old = std::mem::take(&mut state.grains);
+        for (i, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
+            let j = state.grains.push(old.id[i], old.x[i], old.radius[i], old.mass[i], old.material[i]);
+            state.grains.frozen[j] = old.frozen[i];
         }
     }
     state

@@ -26,7 +26,9 @@ impl<S: Space> DemSolver<S> {
             state,
             pipeline,
             substeps: scene.coupling.substeps,
-            frames: frames.filter(|_| scene.output.frames_every > 0).map(|f| (f, scene.output.frames_every)),
+            frames: frames
+                .filter(|_| scene.output.frames_every > 0)
+                .map(|f| (f, scene.output.frames_every)),
             energy_bound,
         };
         if let Some((f, _)) = &mut solver.frames {
@@ -63,7 +65,9 @@ impl<S: Space> DemSolver<S> {
 fn runaway_bound<S: Space>(scene: &Scene, state: &DemState<S>) -> f64 {
     let g = &state.grains;
     let mass: f64 = g.mass.iter().sum();
-    let extent = (0..scene.dim()).map(|k| scene.domain.max[k] - scene.domain.min[k]).fold(0.0, f64::max);
+    let extent = (0..scene.dim())
+        .map(|k| scene.domain.max[k] - scene.domain.min[k])
+        .fold(0.0, f64::max);
     let g_norm = scene.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
     let wall_speed = state
         .walls
@@ -71,7 +75,7 @@ fn runaway_bound<S: Space>(scene: &Scene, state: &DemState<S>) -> f64 {
         .map(|w| {
             let spin = match w.shape {
                 WallShape::Drum { radius, .. } => w.spin.abs() * radius,
-                WallShape::Plane { .. } => 0.0,
+                WallShape::Plane { .. } | WallShape::Segment { .. } => 0.0,
             };
             w.velocity.length() + spin
         })
