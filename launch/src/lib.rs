@@ -3,6 +3,7 @@
 //! (metrics and summary, atomic), [`bench`] (transport benchmarks).
 
 pub mod bench;
+pub mod bench_dem;
 pub mod outputs;
 pub mod participants;
 pub mod run;

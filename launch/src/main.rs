@@ -48,6 +48,8 @@ enum Cmd {
 enum BenchCmd {
     /// Per-macro-step exchange time, iceoryx2 processes vs in-process threads.
     Ipc(grains_launch::bench::IpcArgs),
+    /// DEM µs per grain-step on dense beds, side by side with LAMMPS.
+    Dem(grains_launch::bench_dem::DemArgs),
 }
 
 fn parse_role(s: &str) -> Result<Role, String> {
@@ -105,6 +107,7 @@ fn main() -> ExitCode {
             0
         }),
         Cmd::Bench { what: BenchCmd::Ipc(args) } => grains_launch::bench::ipc(&args).map(|()| 0),
+        Cmd::Bench { what: BenchCmd::Dem(args) } => grains_launch::bench_dem::dem(&args).map(|()| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code),

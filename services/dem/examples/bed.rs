@@ -48,7 +48,11 @@ fn main() {
     let mut pipe = DemPipeline::<D3>::new(threads).unwrap();
     let dt = 5e-7;
     let t = Instant::now();
-    pipe.run(&mut st, 4.0 * dt, 20_000);
+    pipe.run(
+        &mut st,
+        4.0 * dt,
+        std::env::args().nth(3).and_then(|s| s.parse().ok()).unwrap_or(20_000),
+    );
     eprintln!(
         "settled {} grains in {:.1} s, KE {:.3e}",
         st.grains.len(),

@@ -57,22 +57,23 @@ pub struct NeighborList<S: Space> {
 
 /// Separation x_i − x_j with periodic axes wrapped (minimum image).
 #[inline]
-pub fn separation<S: Space>(xi: S::V, xj: S::V, period: S::V, inv: S::V) -> S::V {
-    (xi - xj).min_image(period, inv)
+pub fn separation<S: Space>(xi: S::V, xj: S::V, period: S::V, half: S::V) -> S::V {
+    (xi - xj).min_image(period, half)
 }
 
-/// The periodic lengths (0 on open axes) and their inverses.
+/// The periodic lengths and half lengths (0 on open axes), for [`separation`]. On an open
+/// axis the half length is +∞, so that no separation is ever wrapped there.
 pub fn periods<S: Space>(state: &DemState<S>) -> (S::V, S::V) {
     let d = &state.params.domain;
     let mut p = [0.0; 3];
-    let mut inv = [0.0; 3];
+    let mut half = [f64::INFINITY; 3];
     for k in 0..S::DIM {
         if d.periodic[k] {
             p[k] = d.length(k);
-            inv[k] = 1.0 / p[k];
+            half[k] = 0.5 * p[k];
         }
     }
-    (S::from_array(p), S::from_array(inv))
+    (S::from_array(p), S::from_array(half))
 }
 
 /// Reference point of a wall that moves with it (for the rebuild criterion).
@@ -122,13 +123,13 @@ impl<S: Space> NeighborList<S> {
         if self.x_built.len() != g.len() || self.wall_anchor_built.len() != state.walls.len() || self.skin != state.params.skin {
             return true;
         }
-        let (period, inv) = periods(state);
+        let (period, half) = periods(state);
         let limit = (0.5 * self.skin).powi(2);
         let grain_moved =
             g.x.par_iter()
                 .zip(&self.x_built)
                 .with_min_len(4096)
-                .any(|(&x, &x0)| separation::<S>(x, x0, period, inv).length_squared() > limit);
+                .any(|(&x, &x0)| separation::<S>(x, x0, period, half).length_squared() > limit);
         grain_moved
             || state
                 .walls
@@ -142,7 +143,7 @@ impl<S: Space> NeighborList<S> {
         let g = &state.grains;
         let n = g.len();
         let skin = state.params.skin;
-        let (period, inv) = periods(state);
+        let (period, half) = periods(state);
         let domain = &state.params.domain;
         let r_max = g.radius.iter().copied().fold(0.0, f64::max);
         let cell = (2.0 * r_max + skin).max(1e-12);
@@ -251,7 +252,7 @@ impl<S: Space> NeighborList<S> {
                                 continue;
                             }
                             let cut = ri + g.radius[j as usize] + skin;
-                            if separation::<S>(xi, g.x[j as usize], period, inv).length_squared() < cut * cut {
+                            if separation::<S>(xi, g.x[j as usize], period, half).length_squared() < cut * cut {
                                 found.push(j);
                             }
                         }

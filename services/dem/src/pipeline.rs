@@ -149,8 +149,13 @@ impl<S: Space> DemPipeline<S> {
                 if d.periodic.iter().any(|&p| p) {
                     let mut a = S::to_array(*x);
                     for (k, c) in a.iter_mut().enumerate().take(S::DIM) {
+                        // A grain moves far less than a period per step: one shift suffices.
                         if d.periodic[k] {
-                            *c = d.min[k] + (*c - d.min[k]).rem_euclid(d.length(k));
+                            if *c < d.min[k] {
+                                *c += d.length(k);
+                            } else if *c >= d.max[k] {
+                                *c -= d.length(k);
+                            }
                         }
                     }
                     *x = S::from_array(a);
@@ -174,12 +179,12 @@ impl<S: Space> DemPipeline<S> {
         let g = &state.grains;
         let materials = &state.params.materials;
         let damping: Vec<f64> = materials.iter().map(ContactParams::damping_factor).collect();
-        let (period, inv) = periods(state);
+        let (period, half) = periods(state);
 
         self.neighbors.pairs.par_chunks_mut(self.chunk).for_each(|chunk| {
             for p in chunk {
                 let (i, j) = (p.i as usize, p.j as usize);
-                let d = separation::<S>(g.x[i], g.x[j], period, inv);
+                let d = separation::<S>(g.x[i], g.x[j], period, half);
                 let (ri, rj) = (g.radius[i], g.radius[j]);
                 let r_sum = ri + rj;
                 let dist2 = d.length_squared();
@@ -287,13 +292,13 @@ impl<S: Space> DemPipeline<S> {
     /// Elastic energy stored in the normal and tangential springs of active contacts [J].
     pub fn elastic_energy(&self, state: &DemState<S>) -> f64 {
         let g = &state.grains;
-        let (period, inv) = periods(state);
+        let (period, half) = periods(state);
         let mut e = 0.0;
         for p in self.neighbors.pairs.iter().filter(|p| p.active) {
             let (i, j) = (p.i as usize, p.j as usize);
             let m = &state.params.materials[g.material[i] as usize];
             let s = 0.5 * (g.scale[i] + g.scale[j]);
-            let overlap = g.radius[i] + g.radius[j] - separation::<S>(g.x[i], g.x[j], period, inv).length();
+            let overlap = g.radius[i] + g.radius[j] - separation::<S>(g.x[i], g.x[j], period, half).length();
             e += 0.5 * m.stiffness_normal * s * overlap * overlap + 0.5 * m.stiffness_tangential * s * p.state.spring.length_squared();
         }
         for w in self.neighbors.walls.iter().filter(|w| w.active) {

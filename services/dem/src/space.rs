@@ -30,9 +30,11 @@ pub trait Vector:
         self.length_squared().sqrt()
     }
     fn is_finite(self) -> bool;
-    /// Minimum-image correction of a separation: every component with a nonzero `period`
-    /// is wrapped into [−period/2, period/2] (`inv` = 1/period, 0 where not periodic).
-    fn min_image(self, period: Self, inv: Self) -> Self;
+    /// Minimum-image correction of a separation between two positions that both lie in the
+    /// periodic box (so each component is within one period): a component beyond half its
+    /// `period` is moved back by one period (`half` = period/2; both 0 where not periodic).
+    /// Comparisons, not `round()`, which is a library call on baseline x86-64.
+    fn min_image(self, period: Self, half: Self) -> Self;
 }
 
 impl Vector for DVec2 {
@@ -44,8 +46,10 @@ impl Vector for DVec2 {
         DVec2::is_finite(self)
     }
     #[inline]
-    fn min_image(self, period: Self, inv: Self) -> Self {
-        self - period * (self * inv).round()
+    fn min_image(self, period: Self, half: Self) -> Self {
+        let up = DVec2::select(self.cmpgt(half), period, DVec2::ZERO);
+        let down = DVec2::select(self.cmplt(-half), period, DVec2::ZERO);
+        self - up + down
     }
 }
 
@@ -58,8 +62,10 @@ impl Vector for DVec3 {
         DVec3::is_finite(self)
     }
     #[inline]
-    fn min_image(self, period: Self, inv: Self) -> Self {
-        self - period * (self * inv).round()
+    fn min_image(self, period: Self, half: Self) -> Self {
+        let up = DVec3::select(self.cmpgt(half), period, DVec3::ZERO);
+        let down = DVec3::select(self.cmplt(-half), period, DVec3::ZERO);
+        self - up + down
     }
 }
 
@@ -71,8 +77,14 @@ impl Vector for f64 {
     fn is_finite(self) -> bool {
         f64::is_finite(self)
     }
-    fn min_image(self, period: Self, inv: Self) -> Self {
-        self - period * (self * inv).round()
+    fn min_image(self, period: Self, half: Self) -> Self {
+        if self > half {
+            self - period
+        } else if self < -half {
+            self + period
+        } else {
+            self
+        }
     }
 }
 

@@ -3,6 +3,7 @@
 //! of `grains_service::synthetic` instead.
 
 pub mod frames;
+pub mod lammps_data;
 pub mod setup;
 pub mod solver;
 
