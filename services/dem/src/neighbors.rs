@@ -20,11 +20,6 @@ pub struct PairSlot<S: Space> {
     pub i: u32,
     pub j: u32,
     pub state: ContactState<S::V>,
-    /// Force on grain i (grain j gets the opposite).
-    pub force: S::V,
-    /// n × force, for the torques −r_i (n × f) and −r_j (n × f).
-    pub couple: S::Ang,
-    pub active: bool,
 }
 
 /// One listed grain–wall pair.
@@ -42,9 +37,6 @@ pub struct WallSlot<S: Space> {
 pub struct NeighborList<S: Space> {
     pub pairs: Vec<PairSlot<S>>,
     pub walls: Vec<WallSlot<S>>,
-    /// For grain i, `incident[offsets[i]..offsets[i+1]]` are `pair << 1 | side` (side 1: j).
-    pub offsets: Vec<u32>,
-    pub incident: Vec<u32>,
     /// For grain i, its wall pairs are `walls[wall_offsets[i]..wall_offsets[i+1]]`.
     pub wall_offsets: Vec<u32>,
     x_built: Vec<S::V>,
@@ -117,6 +109,26 @@ pub fn wall_geometry<S: Space>(shape: &WallShape<S>, x: S::V, velocity: S::V, sp
 }
 
 impl<S: Space> NeighborList<S> {
+    /// Positions at the last build (empty before the first).
+    pub fn positions_at_build(&self) -> &[S::V] {
+        &self.x_built
+    }
+
+    /// Whether the list must be rebuilt, given the largest squared grain displacement since
+    /// the last build: a grain or a wall moved more than skin/2, or the grains or walls changed.
+    pub fn needs_rebuild(&self, state: &DemState<S>, moved2: f64) -> bool {
+        let limit = (0.5 * self.skin).powi(2);
+        self.x_built.len() != state.grains.len()
+            || self.wall_anchor_built.len() != state.walls.len()
+            || self.skin != state.params.skin
+            || moved2 > limit
+            || state
+                .walls
+                .iter()
+                .zip(&self.wall_anchor_built)
+                .any(|(w, &a)| (wall_anchor(&w.shape) - a).length_squared() > limit)
+    }
+
     /// Whether the list must be rebuilt before the next force evaluation.
     pub fn stale(&self, state: &DemState<S>) -> bool {
         let g = &state.grains;
@@ -248,7 +260,7 @@ impl<S: Space> NeighborList<S> {
                         }
                         let l = linear(nc);
                         for &j in &sorted[start[l] as usize..start[l + 1] as usize] {
-                            if (j as usize) <= i {
+                            if (j as usize) <= i || (g.frozen[i] && g.frozen[j as usize]) {
                                 continue;
                             }
                             let cut = ri + g.radius[j as usize] + skin;
@@ -306,26 +318,6 @@ impl<S: Space> NeighborList<S> {
                 ..PairSlot::default()
             })
             .collect();
-
-        // Incident lists.
-        let mut offsets = vec![0u32; n + 1];
-        for p in &self.pairs {
-            offsets[p.i as usize + 1] += 1;
-            offsets[p.j as usize + 1] += 1;
-        }
-        for k in 0..n {
-            offsets[k + 1] += offsets[k];
-        }
-        let mut fill = offsets.clone();
-        let mut incident = vec![0u32; self.pairs.len() * 2];
-        for (k, p) in self.pairs.iter().enumerate() {
-            for (side, g) in [(0, p.i), (1, p.j)] {
-                incident[fill[g as usize] as usize] = (k as u32) << 1 | side;
-                fill[g as usize] += 1;
-            }
-        }
-        self.offsets = offsets;
-        self.incident = incident;
 
         // Walls, by grain then wall index.
         let mut old_walls: History<(u64, u32), S::V> = self

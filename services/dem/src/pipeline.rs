@@ -1,18 +1,22 @@
 //! The DEM step (velocity Verlet, as LAMMPS `fix nve/sphere`), on one screen:
 //!
-//! 1. half kick: v += dt/2 · (F/m' + g), ω += dt/2 · τ/I'   (m', I' scaled by 1 − w)
-//! 2. drift: x += dt · v, orientation turned by ω dt; periodic axes wrapped; walls moved
-//! 3. neighbour list rebuilt if a grain or wall moved more than skin/2
-//! 4. forces: every listed pair and grain–wall pair in parallel (each writes its own slot),
-//!    then every grain gathers its slots in a fixed order (no float reduction depends on the
-//!    thread count, so results are bit-identical for any number of threads)
-//! 5. half kick with the new forces.
+//! 1. one pass over the grains: half kick v += dt/2 · (F/m' + g), ω += dt/2 · τ/I'
+//!    (m', I' scaled by 1 − w), then drift x += dt · v, orientation turned by ω dt, periodic
+//!    axes wrapped, and the largest displacement since the last neighbour-list build;
+//! 2. neighbour list rebuilt if a grain or wall moved more than skin/2;
+//! 3. pair forces: the listed pairs are cut into one fixed range per thread; each range adds
+//!    its forces into its own per-grain buffer, in list order (as a serial code would);
+//! 4. one pass over the grains: the buffers summed in range order, plus the grain's wall
+//!    contacts, then the second half kick.
+//!
+//! Results are bit-identical between runs with the same thread count (the ranges, and so the
+//! order of every float sum, depend only on the number of threads and pairs).
 //!
 //! The pipeline owns scratch only (forces, the neighbour list, the thread pool); the state is
 //! passed in.
 
 use crate::contact::{ContactParams, contact_force, reduced_mass};
-use crate::neighbors::{NeighborList, periods, separation, wall_gap, wall_geometry};
+use crate::neighbors::{NeighborList, PairSlot, periods, separation, wall_gap, wall_geometry};
 use crate::space::{Space, Vector};
 use crate::state::{DemState, WallShape};
 use rayon::prelude::*;
@@ -28,11 +32,13 @@ pub struct GrainForce<S: Space> {
 
 pub struct DemPipeline<S: Space> {
     pool: std::sync::Arc<rayon::ThreadPool>,
+    threads: usize,
     pub neighbors: NeighborList<S>,
+    /// Total force, torque and contact count of every grain at the last evaluation.
     pub forces: Vec<GrainForce<S>>,
+    /// One per-grain buffer per pair range.
+    partial: Vec<Vec<GrainForce<S>>>,
     prepared: bool,
-    /// Pair loops run in chunks of this many pairs.
-    chunk: usize,
 }
 
 /// Error building a pipeline (thread pool).
@@ -47,20 +53,25 @@ impl std::fmt::Display for BuildError {
 
 impl std::error::Error for BuildError {}
 
+/// Grains per task in the per-grain passes (small systems stay on one thread).
+const GRAIN_TASK: usize = 4096;
+
 impl<S: Space> DemPipeline<S> {
     /// A pipeline running its loops on `threads` threads (named `dem-worker-<k>`).
     pub fn new(threads: usize) -> Result<Self, BuildError> {
+        let threads = threads.max(1);
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.max(1))
+            .num_threads(threads)
             .thread_name(|k| format!("dem-worker-{k}"))
             .build()
             .map_err(|e| BuildError(format!("cannot start {threads} DEM threads: {e}")))?;
         Ok(DemPipeline {
             pool: std::sync::Arc::new(pool),
+            threads,
             neighbors: NeighborList::default(),
             forces: Vec::new(),
+            partial: Vec::new(),
             prepared: false,
-            chunk: 1024,
         })
     }
 
@@ -72,8 +83,7 @@ impl<S: Space> DemPipeline<S> {
 
     /// Advances the state by one step of dt.
     pub fn step(&mut self, state: &mut DemState<S>, dt: f64) {
-        let pool = self.pool.clone();
-        pool.install(|| self.step_in_pool(state, dt));
+        self.run(state, dt, 1);
     }
 
     /// Advances the state by `n` steps of dt.
@@ -89,27 +99,37 @@ impl<S: Space> DemPipeline<S> {
     fn step_in_pool(&mut self, state: &mut DemState<S>, dt: f64) {
         if !self.prepared || self.forces.len() != state.grains.len() {
             self.neighbors.build(state);
-            self.compute_forces(state, 0.0);
+            self.forces = vec![GrainForce::default(); state.grains.len()];
+            self.pair_forces(state, 0.0);
+            self.finish_forces(state, 0.0);
             self.prepared = true;
         }
-        self.kick(state, 0.5 * dt);
-        self.drift(state, dt);
-        if self.neighbors.stale(state) {
+        let moved = self.kick_drift(state, dt);
+        if self.neighbors.needs_rebuild(state, moved) {
             self.neighbors.build(state);
         }
-        self.compute_forces(state, dt);
-        self.kick(state, 0.5 * dt);
+        self.pair_forces(state, dt);
+        self.finish_forces(state, 0.5 * dt);
         state.time += dt;
     }
 
-    fn kick(&mut self, state: &mut DemState<S>, h: f64) {
-        let g = &mut state.grains;
+    /// First half kick and drift; returns the largest squared displacement of a grain since
+    /// the last neighbour-list build (max is exact in any order, so this is deterministic).
+    fn kick_drift(&mut self, state: &mut DemState<S>, dt: f64) -> f64 {
+        let h = 0.5 * dt;
+        let d = state.params.domain;
         let gravity = state.params.gravity;
-        let forces = &self.forces;
-        (
+        let (period, half) = periods(state);
+        let any_periodic = d.periodic.iter().any(|&p| p);
+        let g = &mut state.grains;
+        let built = self.neighbors.positions_at_build();
+        let check = built.len() == g.len();
+        let moved = (
+            g.x.par_iter_mut(),
             g.v.par_iter_mut(),
             g.omega.par_iter_mut(),
-            forces.par_iter(),
+            g.rot.par_iter_mut(),
+            self.forces.par_iter(),
             g.mass.par_iter(),
             g.radius.par_iter(),
             g.scale.par_iter(),
@@ -117,36 +137,18 @@ impl<S: Space> DemPipeline<S> {
             g.external.par_iter(),
         )
             .into_par_iter()
-            .with_min_len(2048)
-            .for_each(|(v, w, f, &m, &r, &s, &frozen, &ext)| {
+            .enumerate()
+            .with_min_len(GRAIN_TASK)
+            .map(|(i, (x, v, w, rot, f, &m, &r, &s, &frozen, &ext))| {
                 if frozen {
-                    return;
+                    return 0.0;
                 }
                 let inv_m = 1.0 / (m * s);
                 *v += (f.force + ext) * (h * inv_m) + gravity * h;
                 *w += f.torque * (h * inv_m / (S::INERTIA_FACTOR * r * r));
-            });
-    }
-
-    fn drift(&mut self, state: &mut DemState<S>, dt: f64) {
-        let d = state.params.domain;
-        let g = &mut state.grains;
-        (
-            g.x.par_iter_mut(),
-            g.rot.par_iter_mut(),
-            g.v.par_iter(),
-            g.omega.par_iter(),
-            g.frozen.par_iter(),
-        )
-            .into_par_iter()
-            .with_min_len(2048)
-            .for_each(|(x, rot, &v, &w, &frozen)| {
-                if frozen {
-                    return;
-                }
-                *x += v * dt;
-                *rot = S::rotate(*rot, w, dt);
-                if d.periodic.iter().any(|&p| p) {
+                *x += *v * dt;
+                *rot = S::rotate(*rot, *w, dt);
+                if any_periodic {
                     let mut a = S::to_array(*x);
                     for (k, c) in a.iter_mut().enumerate().take(S::DIM) {
                         // A grain moves far less than a period per step: one shift suffices.
@@ -160,7 +162,13 @@ impl<S: Space> DemPipeline<S> {
                     }
                     *x = S::from_array(a);
                 }
-            });
+                if check {
+                    separation::<S>(*x, built[i], period, half).length_squared()
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .reduce(|| 0.0, f64::max);
         for w in &mut state.walls {
             match &mut w.shape {
                 WallShape::Plane { point, .. } => *point += w.velocity * dt,
@@ -171,17 +179,26 @@ impl<S: Space> DemPipeline<S> {
                 }
             }
         }
+        moved
     }
 
-    /// Forces and torques of every contact at the current positions; advances the contact
-    /// histories by dt (0 at preparation: nothing is integrated then).
-    fn compute_forces(&mut self, state: &mut DemState<S>, dt: f64) {
+    /// Grain–grain contact forces at the current positions, added range by range into the
+    /// per-range buffers; advances the contact histories by dt (0 at preparation).
+    fn pair_forces(&mut self, state: &DemState<S>, dt: f64) {
         let g = &state.grains;
+        let n = g.len();
         let materials = &state.params.materials;
         let damping: Vec<f64> = materials.iter().map(ContactParams::damping_factor).collect();
         let (period, half) = periods(state);
-
-        self.neighbors.pairs.par_chunks_mut(self.chunk).for_each(|chunk| {
+        let pairs = &mut self.neighbors.pairs;
+        let ranges = self.threads.min(pairs.len().div_ceil(2048)).max(1);
+        let range_len = pairs.len().div_ceil(ranges).max(1);
+        self.partial.resize_with(ranges, Vec::new);
+        self.partial.truncate(ranges);
+        let ranges_iter = pairs.par_chunks_mut(range_len).zip(self.partial.par_iter_mut());
+        let work = |(chunk, acc): (&mut [PairSlot<S>], &mut Vec<GrainForce<S>>)| {
+            acc.clear();
+            acc.resize(n, GrainForce::default());
             for p in chunk {
                 let (i, j) = (p.i as usize, p.j as usize);
                 let d = separation::<S>(g.x[i], g.x[j], period, half);
@@ -190,82 +207,114 @@ impl<S: Space> DemPipeline<S> {
                 let dist2 = d.length_squared();
                 if dist2 >= r_sum * r_sum && !p.state.bonded {
                     p.state = Default::default();
-                    p.active = false;
                     continue;
                 }
                 let dist = dist2.sqrt();
-                let n = d * (1.0 / dist);
-                let v_rel = (g.v[i] + S::ang_cross(g.omega[i], n * -ri)) - (g.v[j] + S::ang_cross(g.omega[j], n * rj));
+                let nrm = d * (1.0 / dist);
+                let v_rel = (g.v[i] + S::ang_cross(g.omega[i], nrm * -ri)) - (g.v[j] + S::ang_cross(g.omega[j], nrm * rj));
                 let mat = g.material[i] as usize;
                 let scale = 0.5 * (g.scale[i] + g.scale[j]);
                 let m_red = reduced_mass(mass_or_inf(g, i), mass_or_inf(g, j));
                 let gamma = materials[mat].gamma(damping[mat], m_red) * scale;
-                let c = contact_force::<S>(&materials[mat], r_sum - dist, n, v_rel, gamma, scale, dt, &mut p.state);
-                p.force = c.force;
-                p.couple = S::torque(n, c.force);
-                p.active = c.active;
-            }
-        });
-
-        let walls = &state.walls;
-        self.neighbors.walls.par_chunks_mut(self.chunk).for_each(|chunk| {
-            for w in chunk {
-                let i = w.grain as usize;
-                let wall = &walls[w.wall as usize];
-                let (gap, n, v_wall) = wall_geometry(&wall.shape, g.x[i], wall.velocity, wall.spin);
-                let ri = g.radius[i];
-                if gap >= ri && !w.state.bonded {
-                    w.state = Default::default();
-                    w.active = false;
+                let c = contact_force::<S>(&materials[mat], r_sum - dist, nrm, v_rel, gamma, scale, dt, &mut p.state);
+                if !c.active {
                     continue;
                 }
-                let v_rel = g.v[i] + S::ang_cross(g.omega[i], n * -ri) - v_wall;
-                let mat = g.material[i] as usize;
-                let mut params = materials[mat];
-                params.friction = wall.friction;
-                let scale = g.scale[i];
-                let gamma = materials[mat].gamma(damping[mat], mass_or_inf(g, i)) * scale;
-                let c = contact_force::<S>(&params, ri - gap, n, v_rel, gamma, scale, dt, &mut w.state);
-                w.force = c.force;
-                w.couple = S::torque(n, c.force);
-                w.active = c.active;
+                let couple = S::torque(nrm, c.force);
+                let (a, b) = (&mut acc[i], c.force);
+                a.force += b;
+                a.torque -= couple * ri;
+                a.contacts += 1;
+                let bj = &mut acc[j];
+                bj.force -= b;
+                bj.torque -= couple * rj;
+                bj.contacts += 1;
             }
-        });
+        };
+        if ranges == 1 {
+            // One range: no task for the pool to hand out.
+            if let (Some(chunk), Some(acc)) = (Some(&mut pairs[..]), self.partial.first_mut()) {
+                work((chunk, acc));
+            }
+        } else {
+            ranges_iter.for_each(work);
+        }
+    }
 
-        // Gather per grain, in the fixed order of the incident lists.
+    /// Wall contacts, the sum of the pair ranges, and the second half kick (`h` = dt/2; 0 at
+    /// preparation, where only the forces are wanted).
+    fn finish_forces(&mut self, state: &mut DemState<S>, h: f64) {
+        let dt = 2.0 * h;
+        let materials = &state.params.materials;
+        let damping: Vec<f64> = materials.iter().map(ContactParams::damping_factor).collect();
+        {
+            let g = &state.grains;
+            let walls = &state.walls;
+            self.neighbors.walls.par_chunks_mut(1024).for_each(|chunk| {
+                for w in chunk {
+                    let i = w.grain as usize;
+                    let wall = &walls[w.wall as usize];
+                    let (gap, n, v_wall) = wall_geometry(&wall.shape, g.x[i], wall.velocity, wall.spin);
+                    let ri = g.radius[i];
+                    if gap >= ri && !w.state.bonded {
+                        w.state = Default::default();
+                        w.active = false;
+                        continue;
+                    }
+                    let v_rel = g.v[i] + S::ang_cross(g.omega[i], n * -ri) - v_wall;
+                    let mat = g.material[i] as usize;
+                    let mut params = materials[mat];
+                    params.friction = wall.friction;
+                    let scale = g.scale[i];
+                    let gamma = materials[mat].gamma(damping[mat], mass_or_inf(g, i)) * scale;
+                    let c = contact_force::<S>(&params, ri - gap, n, v_rel, gamma, scale, dt, &mut w.state);
+                    w.force = c.force;
+                    w.couple = S::torque(n, c.force);
+                    w.active = c.active;
+                }
+            });
+        }
+
         let nb = &self.neighbors;
-        self.forces.resize(g.len(), GrainForce::default());
-        self.forces.par_iter_mut().enumerate().with_min_len(1024).for_each(|(i, out)| {
-            let mut f = S::V::default();
-            let mut t = S::Ang::default();
-            let mut contacts = 0;
-            let r = g.radius[i];
-            for &e in &nb.incident[nb.offsets[i] as usize..nb.offsets[i + 1] as usize] {
-                let p = &nb.pairs[(e >> 1) as usize];
-                if !p.active {
-                    continue;
+        let partial = &self.partial;
+        let gravity = state.params.gravity;
+        let g = &mut state.grains;
+        (
+            self.forces.par_iter_mut(),
+            g.v.par_iter_mut(),
+            g.omega.par_iter_mut(),
+            g.mass.par_iter(),
+            g.radius.par_iter(),
+            g.scale.par_iter(),
+            g.frozen.par_iter(),
+            g.external.par_iter(),
+        )
+            .into_par_iter()
+            .enumerate()
+            .with_min_len(GRAIN_TASK)
+            .for_each(|(i, (out, v, w, &m, &r, &s, &frozen, &ext))| {
+                let mut total = GrainForce::<S>::default();
+                for acc in partial {
+                    let a = &acc[i];
+                    total.force += a.force;
+                    total.torque += a.torque;
+                    total.contacts += a.contacts;
                 }
-                contacts += 1;
-                if e & 1 == 0 {
-                    f += p.force;
-                } else {
-                    f -= p.force;
+                for ws in &nb.walls[nb.wall_offsets[i] as usize..nb.wall_offsets[i + 1] as usize] {
+                    if ws.active {
+                        total.force += ws.force;
+                        total.torque -= ws.couple * r;
+                        total.contacts += 1;
+                    }
                 }
-                t -= p.couple * r;
-            }
-            for w in &nb.walls[nb.wall_offsets[i] as usize..nb.wall_offsets[i + 1] as usize] {
-                if w.active {
-                    contacts += 1;
-                    f += w.force;
-                    t -= w.couple * r;
+                *out = total;
+                if frozen || h == 0.0 {
+                    return;
                 }
-            }
-            *out = GrainForce {
-                force: f,
-                torque: t,
-                contacts,
-            };
-        });
+                let inv_m = 1.0 / (m * s);
+                *v += (total.force + ext) * (h * inv_m) + gravity * h;
+                *w += total.torque * (h * inv_m / (S::INERTIA_FACTOR * r * r));
+            });
 
         // Loads on walls: the opposite of their contact forces, summed in list order.
         for w in state.walls.iter_mut() {
@@ -294,11 +343,14 @@ impl<S: Space> DemPipeline<S> {
         let g = &state.grains;
         let (period, half) = periods(state);
         let mut e = 0.0;
-        for p in self.neighbors.pairs.iter().filter(|p| p.active) {
+        for p in &self.neighbors.pairs {
             let (i, j) = (p.i as usize, p.j as usize);
             let m = &state.params.materials[g.material[i] as usize];
             let s = 0.5 * (g.scale[i] + g.scale[j]);
             let overlap = g.radius[i] + g.radius[j] - separation::<S>(g.x[i], g.x[j], period, half).length();
+            if overlap <= 0.0 && !p.state.bonded {
+                continue;
+            }
             e += 0.5 * m.stiffness_normal * s * overlap * overlap + 0.5 * m.stiffness_tangential * s * p.state.spring.length_squared();
         }
         for w in self.neighbors.walls.iter().filter(|w| w.active) {
