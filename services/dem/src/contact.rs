@@ -114,7 +114,7 @@ pub struct ContactForce<V> {
 ///
 /// `scale` multiplies the springs (hybrid weighting, 1 − w); `gamma` is the pair's damping
 /// coefficient γ = damping_factor · √m_red (already scaled).
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn contact_force<S: Space>(
     p: &ContactParams,
@@ -146,10 +146,11 @@ pub fn contact_force<S: Space>(
     let kt = p.stiffness_tangential * scale;
     let mut ft = spring * (-kt) - vt * gamma;
     let cap = p.friction * fn_mag.abs() + p.cohesion_tangential * scale;
-    let ft_len = ft.length();
-    if ft_len > cap {
+    let ft_len2 = ft.length_squared();
+    if ft_len2 > cap * cap {
         // Slip: the force sits on the cap, the anchor moves so that the spring alone carries it.
-        ft = ft * (cap / ft_len);
+        // (Squared lengths first: the square root is only needed when sliding.)
+        ft = ft * (cap / ft_len2.sqrt());
         spring = if kt > 0.0 { ft * (-1.0 / kt) } else { spring };
     }
     state.spring = spring;

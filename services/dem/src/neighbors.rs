@@ -108,6 +108,35 @@ pub fn wall_geometry<S: Space>(shape: &WallShape<S>, x: S::V, velocity: S::V, sp
     }
 }
 
+/// Grain order along cells (x fastest, then y, then z) of width `cell`: neighbours in space
+/// become neighbours in memory. Ties keep index order, so the order is deterministic.
+pub fn spatial_order<S: Space>(state: &DemState<S>, cell: f64) -> Vec<u32> {
+    let g = &state.grains;
+    let mut lo = [f64::MAX; 3];
+    let mut hi = [f64::MIN; 3];
+    for &x in &g.x {
+        let a = S::to_array(x);
+        for k in 0..3 {
+            lo[k] = lo[k].min(a[k]);
+            hi[k] = hi[k].max(a[k]);
+        }
+    }
+    let dims: Vec<u64> = (0..3)
+        .map(|k| if k < S::DIM { ((hi[k] - lo[k]) / cell) as u64 + 1 } else { 1 })
+        .collect();
+    let key = |x: S::V| {
+        let a = S::to_array(x);
+        let c: Vec<u64> = (0..3)
+            .map(|k| if k < S::DIM { ((a[k] - lo[k]) / cell) as u64 } else { 0 })
+            .collect();
+        (c[2] * dims[1] + c[1]) * dims[0] + c[0]
+    };
+    let mut order: Vec<u32> = (0..g.len() as u32).collect();
+    let keys: Vec<u64> = g.x.iter().map(|&x| key(x)).collect();
+    order.sort_by_key(|&i| (keys[i as usize], i));
+    order
+}
+
 impl<S: Space> NeighborList<S> {
     /// Positions at the last build (empty before the first).
     pub fn positions_at_build(&self) -> &[S::V] {

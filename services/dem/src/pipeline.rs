@@ -21,6 +21,20 @@ use crate::space::{Space, Vector};
 use crate::state::{DemState, WallShape};
 use rayon::prelude::*;
 
+/// What the pair loop reads of one grain, packed in one place (the arrays of
+/// [`crate::state::Grains`] spread it over seven cache lines); refreshed by the drift.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Hot<S: Space> {
+    pub x: S::V,
+    pub v: S::V,
+    pub omega: S::Ang,
+    pub radius: f64,
+    /// Mass [kg]; +∞ for a frozen grain (an immovable partner, like a wall).
+    pub mass: f64,
+    pub scale: f64,
+    pub material: u32,
+}
+
 /// Per-grain result of the force gather.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GrainForce<S: Space> {
@@ -38,6 +52,9 @@ pub struct DemPipeline<S: Space> {
     pub forces: Vec<GrainForce<S>>,
     /// One per-grain buffer per pair range.
     partial: Vec<Vec<GrainForce<S>>>,
+    hot: Vec<Hot<S>>,
+    /// The last pair evaluation added straight into `forces` (one range).
+    direct: bool,
     prepared: bool,
 }
 
@@ -56,6 +73,9 @@ impl std::error::Error for BuildError {}
 /// Grains per task in the per-grain passes (small systems stay on one thread).
 const GRAIN_TASK: usize = 4096;
 
+/// Re-sort the grains by cell at every this many neighbour-list builds.
+const SORT_EVERY: u64 = 20;
+
 impl<S: Space> DemPipeline<S> {
     /// A pipeline running its loops on `threads` threads (named `dem-worker-<k>`).
     pub fn new(threads: usize) -> Result<Self, BuildError> {
@@ -71,6 +91,8 @@ impl<S: Space> DemPipeline<S> {
             neighbors: NeighborList::default(),
             forces: Vec::new(),
             partial: Vec::new(),
+            hot: Vec::new(),
+            direct: false,
             prepared: false,
         })
     }
@@ -98,19 +120,53 @@ impl<S: Space> DemPipeline<S> {
 
     fn step_in_pool(&mut self, state: &mut DemState<S>, dt: f64) {
         if !self.prepared || self.forces.len() != state.grains.len() {
-            self.neighbors.build(state);
             self.forces = vec![GrainForce::default(); state.grains.len()];
+            self.sort_grains(state);
+            self.refresh_hot(state);
+            self.neighbors.build(state);
             self.pair_forces(state, 0.0);
             self.finish_forces(state, 0.0);
             self.prepared = true;
         }
         let moved = self.kick_drift(state, dt);
         if self.neighbors.needs_rebuild(state, moved) {
+            if self.neighbors.builds % SORT_EVERY == 0 {
+                self.sort_grains(state);
+                self.refresh_hot(state);
+            }
             self.neighbors.build(state);
         }
         self.pair_forces(state, dt);
         self.finish_forces(state, 0.5 * dt);
         state.time += dt;
+    }
+
+    /// Re-sorts the grains by cell (memory follows space, as LAMMPS' `atom_modify sort`);
+    /// the forces of the last step move with them, the contact histories follow by id.
+    fn sort_grains(&mut self, state: &mut DemState<S>) {
+        let r_max = state.grains.radius.iter().copied().fold(0.0, f64::max);
+        let order = crate::neighbors::spatial_order(state, 2.0 * r_max + state.params.skin);
+        if order.iter().enumerate().all(|(k, &i)| k == i as usize) {
+            return;
+        }
+        state.grains.permute(&order);
+        let old = std::mem::take(&mut self.forces);
+        self.forces = order.iter().map(|&k| old[k as usize]).collect();
+    }
+
+    fn refresh_hot(&mut self, state: &DemState<S>) {
+        let g = &state.grains;
+        self.hot = (0..g.len())
+            .map(|i| Hot {
+                x: g.x[i],
+                v: g.v[i],
+                omega: g.omega[i],
+                radius: g.radius[i],
+                mass: if g.frozen[i] { f64::INFINITY } else { g.mass[i] },
+                scale: g.scale[i],
+                material: g.material[i],
+            })
+            .collect();
     }
 
     /// First half kick and drift; returns the largest squared displacement of a grain since
@@ -121,6 +177,17 @@ impl<S: Space> DemPipeline<S> {
         let gravity = state.params.gravity;
         let (period, half) = periods(state);
         let any_periodic = d.periodic.iter().any(|&p| p);
+        // Box bounds for the wrap; open axes never wrap (bounds ±∞, period 0).
+        let bound = |v: &[f64; 3], open: f64| {
+            let mut a = [open; 3];
+            for k in 0..S::DIM {
+                if d.periodic[k] {
+                    a[k] = v[k];
+                }
+            }
+            S::from_array(a)
+        };
+        let (lo, hi) = (bound(&d.min, f64::NEG_INFINITY), bound(&d.max, f64::INFINITY));
         let g = &mut state.grains;
         let built = self.neighbors.positions_at_build();
         let check = built.len() == g.len();
@@ -130,6 +197,7 @@ impl<S: Space> DemPipeline<S> {
             g.omega.par_iter_mut(),
             g.rot.par_iter_mut(),
             self.forces.par_iter(),
+            self.hot.par_iter_mut(),
             g.mass.par_iter(),
             g.radius.par_iter(),
             g.scale.par_iter(),
@@ -139,7 +207,7 @@ impl<S: Space> DemPipeline<S> {
             .into_par_iter()
             .enumerate()
             .with_min_len(GRAIN_TASK)
-            .map(|(i, (x, v, w, rot, f, &m, &r, &s, &frozen, &ext))| {
+            .map(|(i, (x, v, w, rot, f, hot, &m, &r, &s, &frozen, &ext))| {
                 if frozen {
                     return 0.0;
                 }
@@ -149,19 +217,11 @@ impl<S: Space> DemPipeline<S> {
                 *x += *v * dt;
                 *rot = S::rotate(*rot, *w, dt);
                 if any_periodic {
-                    let mut a = S::to_array(*x);
-                    for (k, c) in a.iter_mut().enumerate().take(S::DIM) {
-                        // A grain moves far less than a period per step: one shift suffices.
-                        if d.periodic[k] {
-                            if *c < d.min[k] {
-                                *c += d.length(k);
-                            } else if *c >= d.max[k] {
-                                *c -= d.length(k);
-                            }
-                        }
-                    }
-                    *x = S::from_array(a);
+                    *x = x.wrap(lo, hi, period);
                 }
+                hot.x = *x;
+                hot.v = *v;
+                hot.omega = *w;
                 if check {
                     separation::<S>(*x, built[i], period, half).length_squared()
                 } else {
@@ -185,8 +245,8 @@ impl<S: Space> DemPipeline<S> {
     /// Grain–grain contact forces at the current positions, added range by range into the
     /// per-range buffers; advances the contact histories by dt (0 at preparation).
     fn pair_forces(&mut self, state: &DemState<S>, dt: f64) {
-        let g = &state.grains;
-        let n = g.len();
+        let hot = &self.hot;
+        let n = hot.len();
         let materials = &state.params.materials;
         let damping: Vec<f64> = materials.iter().map(ContactParams::damping_factor).collect();
         let (period, half) = periods(state);
@@ -201,8 +261,9 @@ impl<S: Space> DemPipeline<S> {
             acc.resize(n, GrainForce::default());
             for p in chunk {
                 let (i, j) = (p.i as usize, p.j as usize);
-                let d = separation::<S>(g.x[i], g.x[j], period, half);
-                let (ri, rj) = (g.radius[i], g.radius[j]);
+                let (gi, gj) = (&hot[i], &hot[j]);
+                let d = separation::<S>(gi.x, gj.x, period, half);
+                let (ri, rj) = (gi.radius, gj.radius);
                 let r_sum = ri + rj;
                 let dist2 = d.length_squared();
                 if dist2 >= r_sum * r_sum && !p.state.bonded {
@@ -211,10 +272,10 @@ impl<S: Space> DemPipeline<S> {
                 }
                 let dist = dist2.sqrt();
                 let nrm = d * (1.0 / dist);
-                let v_rel = (g.v[i] + S::ang_cross(g.omega[i], nrm * -ri)) - (g.v[j] + S::ang_cross(g.omega[j], nrm * rj));
-                let mat = g.material[i] as usize;
-                let scale = 0.5 * (g.scale[i] + g.scale[j]);
-                let m_red = reduced_mass(mass_or_inf(g, i), mass_or_inf(g, j));
+                let v_rel = (gi.v + S::ang_cross(gi.omega, nrm * -ri)) - (gj.v + S::ang_cross(gj.omega, nrm * rj));
+                let mat = gi.material as usize;
+                let scale = 0.5 * (gi.scale + gj.scale);
+                let m_red = reduced_mass(gi.mass, gj.mass);
                 let gamma = materials[mat].gamma(damping[mat], m_red) * scale;
                 let c = contact_force::<S>(&materials[mat], r_sum - dist, nrm, v_rel, gamma, scale, dt, &mut p.state);
                 if !c.active {
@@ -231,11 +292,11 @@ impl<S: Space> DemPipeline<S> {
                 bj.contacts += 1;
             }
         };
-        if ranges == 1 {
-            // One range: no task for the pool to hand out.
-            if let (Some(chunk), Some(acc)) = (Some(&mut pairs[..]), self.partial.first_mut()) {
-                work((chunk, acc));
-            }
+        self.direct = ranges == 1;
+        if self.direct {
+            // One range: it adds straight into the totals (as a serial code would), and no
+            // task goes through the pool.
+            work((&mut pairs[..], &mut self.forces));
         } else {
             ranges_iter.for_each(work);
         }
@@ -276,7 +337,7 @@ impl<S: Space> DemPipeline<S> {
         }
 
         let nb = &self.neighbors;
-        let partial = &self.partial;
+        let (partial, direct): (&[Vec<GrainForce<S>>], bool) = if self.direct { (&[], true) } else { (&self.partial, false) };
         let gravity = state.params.gravity;
         let g = &mut state.grains;
         (
@@ -293,7 +354,7 @@ impl<S: Space> DemPipeline<S> {
             .enumerate()
             .with_min_len(GRAIN_TASK)
             .for_each(|(i, (out, v, w, &m, &r, &s, &frozen, &ext))| {
-                let mut total = GrainForce::<S>::default();
+                let mut total = if direct { *out } else { GrainForce::<S>::default() };
                 for acc in partial {
                     let a = &acc[i];
                     total.force += a.force;

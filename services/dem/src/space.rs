@@ -35,6 +35,9 @@ pub trait Vector:
     /// `period` is moved back by one period (`half` = period/2; both 0 where not periodic).
     /// Comparisons, not `round()`, which is a library call on baseline x86-64.
     fn min_image(self, period: Self, half: Self) -> Self;
+    /// Wraps a position that left the box [lo, hi) by less than one period back into it
+    /// (`period` 0 on open axes, whose bounds are ±∞ for this purpose).
+    fn wrap(self, lo: Self, hi: Self, period: Self) -> Self;
 }
 
 impl Vector for DVec2 {
@@ -50,6 +53,12 @@ impl Vector for DVec2 {
         let up = DVec2::select(self.cmpgt(half), period, DVec2::ZERO);
         let down = DVec2::select(self.cmplt(-half), period, DVec2::ZERO);
         self - up + down
+    }
+    #[inline]
+    fn wrap(self, lo: Self, hi: Self, period: Self) -> Self {
+        let up = DVec2::select(self.cmplt(lo), period, DVec2::ZERO);
+        let down = DVec2::select(self.cmpge(hi), period, DVec2::ZERO);
+        self + up - down
     }
 }
 
@@ -67,6 +76,12 @@ impl Vector for DVec3 {
         let down = DVec3::select(self.cmplt(-half), period, DVec3::ZERO);
         self - up + down
     }
+    #[inline]
+    fn wrap(self, lo: Self, hi: Self, period: Self) -> Self {
+        let up = DVec3::select(self.cmplt(lo), period, DVec3::ZERO);
+        let down = DVec3::select(self.cmpge(hi), period, DVec3::ZERO);
+        self + up - down
+    }
 }
 
 impl Vector for f64 {
@@ -76,6 +91,15 @@ impl Vector for f64 {
     }
     fn is_finite(self) -> bool {
         f64::is_finite(self)
+    }
+    fn wrap(self, lo: Self, hi: Self, period: Self) -> Self {
+        if self < lo {
+            self + period
+        } else if self >= hi {
+            self - period
+        } else {
+            self
+        }
     }
     fn min_image(self, period: Self, half: Self) -> Self {
         if self > half {

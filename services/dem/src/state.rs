@@ -38,6 +38,31 @@ impl<S: Space> Grains<S> {
         self.id.is_empty()
     }
 
+    /// Storage index of the grain with stable id `id` (indices change when the pipeline
+    /// re-sorts grains by cell for locality).
+    pub fn index_of(&self, id: u64) -> Option<usize> {
+        self.id.iter().position(|&x| x == id)
+    }
+
+    /// Reorders every array by `order` (new index k holds old grain `order[k]`).
+    pub fn permute(&mut self, order: &[u32]) {
+        fn apply<T: Copy>(v: &mut Vec<T>, order: &[u32]) {
+            let old = std::mem::take(v);
+            *v = order.iter().map(|&k| old[k as usize]).collect();
+        }
+        apply(&mut self.id, order);
+        apply(&mut self.x, order);
+        apply(&mut self.v, order);
+        apply(&mut self.omega, order);
+        apply(&mut self.rot, order);
+        apply(&mut self.radius, order);
+        apply(&mut self.mass, order);
+        apply(&mut self.scale, order);
+        apply(&mut self.material, order);
+        apply(&mut self.frozen, order);
+        apply(&mut self.external, order);
+    }
+
     /// Adds a grain at rest; returns its index.
     pub fn push(&mut self, id: u64, x: S::V, radius: f64, mass: f64, material: u32) -> usize {
         self.id.push(id);

@@ -68,6 +68,8 @@ fn restitution<S: Space>(e: f64) -> f64 {
     let dt = contact_time::<S>() / 400.0;
     let steps = (4.0 * contact_time::<S>() / dt) as usize + (0.1 * RADIUS / v0 / dt) as usize;
     pipe.run(&mut st, dt, steps);
+    // Storage indices may change (grains are re-sorted by cell): find the grains by id.
+    let (a, b) = (st.grains.index_of(0).unwrap(), st.grains.index_of(1).unwrap());
     let gap = (st.grains.x[b] - st.grains.x[a]).length() - 2.0 * RADIUS;
     assert!(gap > 0.0, "the grains must have separated");
     let rebound = S::component(st.grains.v[b] - st.grains.v[a], 0);
@@ -183,6 +185,7 @@ fn pulled_pair_gap(force: f64, strength: f64) -> f64 {
     let mut pipe = DemPipeline::<D2>::new(1).unwrap();
     let dt = contact_time::<D2>() / 100.0;
     pipe.run(&mut st, dt, 2_000);
+    let (a, b) = (st.grains.index_of(0).unwrap(), st.grains.index_of(1).unwrap());
     // Load slowly (a step load would overshoot the static stretch), then hold.
     let ramp = 20_000;
     for k in 1..=ramp {
@@ -192,6 +195,7 @@ fn pulled_pair_gap(force: f64, strength: f64) -> f64 {
         pipe.step(&mut st, dt);
     }
     pipe.run(&mut st, dt, 30_000);
+    let (a, b) = (st.grains.index_of(0).unwrap(), st.grains.index_of(1).unwrap());
     (st.grains.x[b] - st.grains.x[a]).length() - 2.0 * RADIUS
 }
 
@@ -204,12 +208,13 @@ fn cohesive_bond_holds_below_its_strength_and_breaks_above() {
     assert!(gap > 10.0 * strength / KN, "above the strength the grains separate: gap {gap}");
 }
 
-fn settle_3d(threads: usize) -> Vec<DVec3> {
+fn settle_3d(threads: usize) -> Vec<(u64, DVec3, DVec3)> {
     let mut st = gas::<D3>(1500, 0.3, 0.5, 9);
     st.params.gravity = DVec3::new(0.0, -9.81, 0.0);
     let mut pipe = DemPipeline::<D3>::new(threads).unwrap();
     pipe.run(&mut st, contact_time::<D3>() / 50.0, 3_000);
-    st.grains.x
+    let g = &st.grains;
+    (0..g.len()).map(|i| (g.id[i], g.x[i], g.v[i])).collect()
 }
 
 /// Same seed and thread count ⇒ the same bits (the pair ranges, and so the order of every
