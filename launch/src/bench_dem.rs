@@ -271,15 +271,15 @@ fn run_lammps(peers: &Path, beds: &Path, case: &Case, pair: &str, steps: u64) ->
     let text = std::fs::read_to_string(&log)?;
     let loop_line = text
         .lines()
-        .filter(|l| l.starts_with("Loop time of"))
-        .last()
+        .rev()
+        .find(|l| l.starts_with("Loop time of"))
         .context("no 'Loop time' in the LAMMPS log")?;
     let f: Vec<&str> = loop_line.split_whitespace().collect();
     let (t, n, m): (f64, f64, f64) = (f[3].parse()?, f[8].parse()?, f[11].parse()?);
     let cpu_pct: f64 = text
         .lines()
-        .filter(|l| l.contains("% CPU use"))
-        .last()
+        .rev()
+        .find(|l| l.contains("% CPU use"))
         .and_then(|l| l.split('%').next())
         .and_then(|p| p.trim().parse().ok())
         .unwrap_or(100.0);

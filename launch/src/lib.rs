@@ -5,6 +5,7 @@
 pub mod bench;
 pub mod bench_dem;
 pub mod outputs;
+pub mod pack;
 pub mod participants;
 pub mod run;
 

@@ -35,6 +35,8 @@ enum Cmd {
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
     },
+    /// Pour and settle a DEM scene's grains; save the packing for scenes to reuse.
+    Pack(grains_launch::pack::PackArgs),
     /// Check a scene file and print what a run of it would start.
     Check { scene: PathBuf },
     /// Benchmarks that print tables (ipc: transport cost per macro-step).
@@ -93,6 +95,7 @@ fn main() -> ExitCode {
                 o.status.exit_code()
             })
         }
+        Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
         Cmd::Check { scene } => grains_protocol::scene::load(&scene).map_err(anyhow::Error::from).map(|s| {
             let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
             println!(

@@ -118,6 +118,20 @@ pub fn new_run_id() -> String {
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
+    // Participants read the run's copy of the scene: packing files must not depend on where
+    // that copy lies, so their paths become absolute there.
+    let (scene, text) = if scene.bodies.iter().any(|b| b.packing.is_some()) {
+        let mut overrides = opts.overrides.clone();
+        for (k, b) in scene.bodies.iter().enumerate() {
+            if let Some(p) = &b.packing {
+                let abs = std::fs::canonicalize(p).with_context(|| format!("resolving {}", p.display()))?;
+                overrides.push(format!("body.{k}.packing={:?}", abs.display().to_string()));
+            }
+        }
+        scene::load_with_overrides(&opts.scene_path, &overrides)?
+    } else {
+        (scene, text)
+    };
     let roles = scene.participants();
     if scene.synthetic.is_none() {
         if roles != [Role::Dem] {

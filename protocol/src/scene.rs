@@ -142,6 +142,9 @@ pub struct Body {
     pub material: usize,
     pub model: Model,
     pub shape: Shape,
+    /// A packing (LAMMPS data file, e.g. written by `grains pack`) whose grains inside the
+    /// shape make up the body, instead of a fresh lattice. Relative to the scene file.
+    pub packing: Option<PathBuf>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -752,7 +755,34 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             ));
         }
         let shape = shape(ctx, dim, &b.shape, &b.min, &b.max, &b.center, &b.radius, &f)?;
-        bodies.push(Body { material, model, shape });
+        let packing = match &b.packing {
+            None => None,
+            Some(p) if model != Model::Dem => {
+                return Err(ctx.err(
+                    Some(p.span()),
+                    Some(&f("packing")),
+                    "a packing file makes grains: only a model = \"dem\" body can have one".into(),
+                ));
+            }
+            Some(p) => {
+                let base = ctx.path.parent().unwrap_or(Path::new("."));
+                let path = base.join(p.get_ref());
+                if !path.is_file() {
+                    return Err(ctx.err(
+                        Some(p.span()),
+                        Some(&f("packing")),
+                        format!("no packing file at {} (paths are relative to the scene file)", path.display()),
+                    ));
+                }
+                Some(path)
+            }
+        };
+        bodies.push(Body {
+            material,
+            model,
+            shape,
+            packing,
+        });
     }
 
     let mut walls = Vec::new();
@@ -1133,6 +1163,7 @@ pub mod raw {
         pub max: Option<Spanned<Vec<f64>>>,
         pub center: Option<Spanned<Vec<f64>>>,
         pub radius: Option<Spanned<f64>>,
+        pub packing: Option<Spanned<String>>,
     }
 
     #[derive(Deserialize)]

@@ -296,3 +296,77 @@ fn a_time_step_above_the_stable_limit_is_refused_before_the_run() {
     assert!(!out.join("dem_small_2d").exists(), "nothing may run or be written");
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+#[test]
+fn a_packing_from_grains_pack_is_reused_by_a_scene() {
+    let _machine = machine();
+    let out = out_dir("pack");
+    let data = out.join("bed.data");
+    let mut pack = Running::grains(&[
+        "pack",
+        "tests/scenes/dem_small_2d.toml",
+        "--out",
+        data.to_str().unwrap(),
+        "--friction",
+        "0.01",
+        "--set",
+        "run.steps=600",
+    ]);
+    assert!(pack.wait_exit(LONG).success(), "{}", pack.stderr());
+    let text = std::fs::read_to_string(&data).unwrap();
+    let n: usize = text
+        .lines()
+        .find(|l| l.ends_with(" atoms"))
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(n > 200, "{n} grains packed");
+
+    // A scene whose body takes the packing (relative to the scene file) instead of a lattice.
+    let scene = std::fs::read_to_string(repo().join("tests/scenes/dem_small_2d.toml"))
+        .unwrap()
+        .replace(
+            "shape = \"box\"\nmin = [0.0, 0.0]\nmax = [0.02, 0.02]",
+            "shape = \"box\"\npacking = \"bed.data\"\nmin = [0.0, 0.0]\nmax = [0.02, 0.03]",
+        );
+    assert!(scene.contains("packing"), "the test scene changed shape");
+    let scene_path = out.join("reuse.toml");
+    std::fs::write(&scene_path, scene).unwrap();
+    let (status, err) = run_to_end(&["run", scene_path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    assert_eq!(
+        column(&dir, "dem_items")[0].parse::<usize>().unwrap(),
+        n,
+        "every packed grain is in the body"
+    );
+    // The body's grains sit where the packing put them (frame 0 is the initial state).
+    let atom: Vec<f64> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("Atoms"))
+        .nth(2)
+        .unwrap()
+        .split_whitespace()
+        .skip(4)
+        .take(2)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let frame = std::fs::read_to_string(dir.join("frames/grains_00000000.vtu")).unwrap();
+    let first: Vec<f64> = frame
+        .lines()
+        .skip_while(|l| !l.contains("<Points>"))
+        .nth(2)
+        .unwrap()
+        .split_whitespace()
+        .take(2)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (atom[0] - first[0]).abs() < 1e-12 && (atom[1] - first[1]).abs() < 1e-12,
+        "{atom:?} vs {first:?}"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}

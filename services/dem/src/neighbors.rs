@@ -344,7 +344,6 @@ impl<S: Space> NeighborList<S> {
                 i,
                 j,
                 state: lookup(g.id[i as usize], g.id[j as usize]),
-                ..PairSlot::default()
             })
             .collect();
 

@@ -39,7 +39,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 }
 
 fn run_physics<T: Transport, S: Space>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
-    let state = setup::build_state::<S>(scene);
+    let state = setup::build_state::<S>(scene)?;
     let frames = opts.out_dir.as_deref().map(frames::FrameWriter::new).transpose()?;
     let mut solver = solver::DemSolver::new(scene, state, frames)?;
     participant::run(transport, Role::Dem, scene, opts, &mut solver)

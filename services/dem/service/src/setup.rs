@@ -65,7 +65,7 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
 
 /// Builds the DEM state of a scene: grains of every `dem` body on a jittered lattice (a
 /// loose packing that gravity settles), walls, domain. Deterministic from the scene's seed.
-pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
+pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
     let dim = scene.dim();
     let mut materials = Vec::new();
     let mut material_index = vec![u32::MAX; scene.materials.len()];
@@ -99,6 +99,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
     };
     let mut rng = Rng::new(scene.seed);
     let mut next_id = 0u64;
+    let mut from_packing = Vec::new();
     for body in scene.bodies.iter().filter(|b| b.model == Model::Dem) {
         let mat = &scene.materials[body.material];
         let Some(dem) = &mat.dem else { continue };
@@ -116,6 +117,27 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
                 (lo, hi, Some((S::from_array(center), radius)))
             }
         };
+        if let Some(path) = &body.packing {
+            // Grains of the packing whose centre lies in the shape, at rest.
+            let data = crate::lammps_data::read(path).map_err(anyhow::Error::msg)?;
+            for a in &data.atoms {
+                let x = S::from_array(a.x);
+                let inside = match body.shape {
+                    Shape::Box { min, max } => (0..dim).all(|k| a.x[k] >= min[k] && a.x[k] <= max[k]),
+                    Shape::Ball { center, radius } => (x - S::from_array(center)).length() <= radius,
+                };
+                if inside {
+                    from_packing.push(true);
+                    let r = 0.5 * a.diameter;
+                    let i = state
+                        .grains
+                        .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
+                    state.grains.frozen[i] = a.kind == 2;
+                    next_id += 1;
+                }
+            }
+            continue;
+        }
         for x in lattice_in_box::<S>(lo, hi, spacing, r_max * 1.01, 0.01 * dem.radius, &mut rng) {
             if let Some((c, big_r)) = ball
                 && (x - c).length() > big_r - r_max
@@ -123,6 +145,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
                 continue;
             }
             let r = radius(&mut rng, dem.radius, dem.radius_std);
+            from_packing.push(false);
             state
                 .grains
                 .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
@@ -150,13 +173,15 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
             WallShape::Segment { from, to } => add(Wall::segment(S::from_array(from), S::from_array(to), w.friction)),
         }
     }
-    // Lattice sites a wall cuts through (a drum's curve, a hopper's slope) stay empty.
+    // Lattice sites a wall cuts through (a drum's curve, a hopper's slope) stay empty; grains
+    // of a packing keep the small overlaps they settled with.
     let keep: Vec<bool> = (0..state.grains.len())
         .map(|i| {
-            state
-                .walls
-                .iter()
-                .all(|w| grains_dem::neighbors::wall_gap(&w.shape, state.grains.x[i]) > state.grains.radius[i])
+            from_packing[i]
+                || state
+                    .walls
+                    .iter()
+                    .all(|w| grains_dem::neighbors::wall_gap(&w.shape, state.grains.x[i]) > state.grains.radius[i])
         })
         .collect();
     if keep.iter().any(|k| !k) {
@@ -166,5 +191,5 @@ pub fn build_state<S: Space>(scene: &Scene) -> DemState<S> {
             state.grains.frozen[j] = old.frozen[i];
         }
     }
-    state
+    Ok(state)
 }
