@@ -96,7 +96,10 @@ fn main() -> ExitCode {
             })
         }
         Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
-        Cmd::Check { scene } => grains_protocol::scene::load(&scene).map_err(anyhow::Error::from).map(|s| {
+        Cmd::Check { scene } => grains_protocol::scene::load(&scene).map_err(anyhow::Error::from).and_then(|s| {
+            if s.synthetic.is_none() && s.participants() == [Role::Dem] {
+                grains_dem_service::check_scene(&s)?;
+            }
             let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
             println!(
                 "{}: ok: scene {:?}, {}D, {} steps of {} s; starts {}",
@@ -107,7 +110,7 @@ fn main() -> ExitCode {
                 s.dt,
                 roles.join(", ")
             );
-            0
+            Ok(0)
         }),
         Cmd::Bench { what: BenchCmd::Ipc(args) } => grains_launch::bench::ipc(&args).map(|()| 0),
         Cmd::Bench { what: BenchCmd::Dem(args) } => grains_launch::bench_dem::dem(&args).map(|()| 0),

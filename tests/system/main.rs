@@ -267,6 +267,9 @@ fn a_dem_scene_starts_only_the_dem_and_threads_give_the_same_physics() {
     for name in ["\"id\"", "\"radius\"", "\"velocity\"", "\"angular_velocity\"", "\"contacts\""] {
         assert!(vtu.contains(name), "frame lacks {name}");
     }
+    // The walls' loads: one row per macro-step.
+    let walls = std::fs::read_to_string(dir.join("walls.csv")).unwrap();
+    assert_eq!(walls.lines().count(), 41, "header + 40 steps");
     // Settling under gravity: the grains gain downward momentum from rest.
     let py: Vec<f64> = column(&dir, "dem_py").iter().map(|v| v.parse().unwrap()).collect();
     assert!(py[5] < 0.0, "{py:?}");

@@ -325,7 +325,7 @@ impl<S: Space> NeighborList<S> {
                 })
             })
             .collect();
-        old.sort_unstable_by_key(|e| e.0);
+        old.par_sort_unstable_by_key(|e| e.0);
         let lookup = |a: u64, b: u64| -> ContactState<S::V> {
             let (key, flip) = if a < b { ((a, b), false) } else { ((b, a), true) };
             match old.binary_search_by_key(&key, |e| e.0) {
@@ -337,10 +337,11 @@ impl<S: Space> NeighborList<S> {
                 Err(_) => ContactState::default(),
             }
         };
-        self.pairs = chunks
-            .into_iter()
-            .flatten()
-            .map(|(i, j)| PairSlot {
+        let listed: Vec<(u32, u32)> = chunks.into_iter().flatten().collect();
+        self.pairs = listed
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&(i, j)| PairSlot {
                 i,
                 j,
                 state: lookup(g.id[i as usize], g.id[j as usize]),

@@ -35,6 +35,9 @@ pub struct Hot<S: Space> {
     pub material: u32,
 }
 
+/// A pair range's force buffer: the first grain of its window and one entry per grain.
+type Window<S> = (usize, Vec<GrainForce<S>>);
+
 /// Per-grain result of the force gather.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GrainForce<S: Space> {
@@ -50,8 +53,9 @@ pub struct DemPipeline<S: Space> {
     pub neighbors: NeighborList<S>,
     /// Total force, torque and contact count of every grain at the last evaluation.
     pub forces: Vec<GrainForce<S>>,
-    /// One per-grain buffer per pair range.
-    partial: Vec<Vec<GrainForce<S>>>,
+    /// One buffer per pair range, over the window of grains its pairs touch (first index,
+    /// entries): grains are sorted in space, so a window is about N/threads grains.
+    partial: Vec<Window<S>>,
     hot: Vec<Hot<S>>,
     /// The last pair evaluation added straight into `forces` (one range).
     direct: bool,
@@ -253,12 +257,21 @@ impl<S: Space> DemPipeline<S> {
         let pairs = &mut self.neighbors.pairs;
         let ranges = self.threads.min(pairs.len().div_ceil(2048)).max(1);
         let range_len = pairs.len().div_ceil(ranges).max(1);
-        self.partial.resize_with(ranges, Vec::new);
+        self.partial.resize_with(ranges, || (0, Vec::new()));
         self.partial.truncate(ranges);
         let ranges_iter = pairs.par_chunks_mut(range_len).zip(self.partial.par_iter_mut());
-        let work = |(chunk, acc): (&mut [PairSlot<S>], &mut Vec<GrainForce<S>>)| {
+        let work = |(chunk, (off, acc)): (&mut [PairSlot<S>], &mut Window<S>), whole: bool| {
+            // Pairs are listed by first grain, so the window runs from the first pair's i to
+            // the largest j of the range (the whole set when one range adds into the totals).
+            *off = if whole { 0 } else { chunk.first().map_or(0, |p| p.i as usize) };
+            let end = if whole {
+                n
+            } else {
+                chunk.iter().map(|p| p.j as usize + 1).max().unwrap_or(*off).min(n)
+            };
             acc.clear();
-            acc.resize(n, GrainForce::default());
+            acc.resize(end - *off, GrainForce::default());
+            let off = *off;
             for p in chunk {
                 let (i, j) = (p.i as usize, p.j as usize);
                 let (gi, gj) = (&hot[i], &hot[j]);
@@ -282,11 +295,11 @@ impl<S: Space> DemPipeline<S> {
                     continue;
                 }
                 let couple = S::torque(nrm, c.force);
-                let (a, b) = (&mut acc[i], c.force);
+                let (a, b) = (&mut acc[i - off], c.force);
                 a.force += b;
                 a.torque -= couple * ri;
                 a.contacts += 1;
-                let bj = &mut acc[j];
+                let bj = &mut acc[j - off];
                 bj.force -= b;
                 bj.torque -= couple * rj;
                 bj.contacts += 1;
@@ -296,9 +309,11 @@ impl<S: Space> DemPipeline<S> {
         if self.direct {
             // One range: it adds straight into the totals (as a serial code would), and no
             // task goes through the pool.
-            work((&mut pairs[..], &mut self.forces));
+            let mut all = (0, std::mem::take(&mut self.forces));
+            work((&mut pairs[..], &mut all), true);
+            self.forces = all.1;
         } else {
-            ranges_iter.for_each(work);
+            ranges_iter.for_each(|r| work(r, false));
         }
     }
 
@@ -337,7 +352,7 @@ impl<S: Space> DemPipeline<S> {
         }
 
         let nb = &self.neighbors;
-        let (partial, direct): (&[Vec<GrainForce<S>>], bool) = if self.direct { (&[], true) } else { (&self.partial, false) };
+        let (partial, direct): (&[Window<S>], bool) = if self.direct { (&[], true) } else { (&self.partial, false) };
         let gravity = state.params.gravity;
         let g = &mut state.grains;
         (
@@ -355,11 +370,12 @@ impl<S: Space> DemPipeline<S> {
             .with_min_len(GRAIN_TASK)
             .for_each(|(i, (out, v, w, &m, &r, &s, &frozen, &ext))| {
                 let mut total = if direct { *out } else { GrainForce::<S>::default() };
-                for acc in partial {
-                    let a = &acc[i];
-                    total.force += a.force;
-                    total.torque += a.torque;
-                    total.contacts += a.contacts;
+                for (off, acc) in partial {
+                    if let Some(a) = i.checked_sub(*off).and_then(|k| acc.get(k)) {
+                        total.force += a.force;
+                        total.torque += a.torque;
+                        total.contacts += a.contacts;
+                    }
                 }
                 for ws in &nb.walls[nb.wall_offsets[i] as usize..nb.wall_offsets[i + 1] as usize] {
                     if ws.active {

@@ -40,7 +40,6 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 
 fn run_physics<T: Transport, S: Space>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     let state = setup::build_state::<S>(scene)?;
-    let frames = opts.out_dir.as_deref().map(frames::FrameWriter::new).transpose()?;
-    let mut solver = solver::DemSolver::new(scene, state, frames)?;
+    let mut solver = solver::DemSolver::new(scene, state, opts.out_dir.as_deref())?;
     participant::run(transport, Role::Dem, scene, opts, &mut solver)
 }

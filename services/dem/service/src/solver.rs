@@ -14,21 +14,40 @@ pub struct DemSolver<S: Space> {
     pub pipeline: DemPipeline<S>,
     substeps: u32,
     frames: Option<(FrameWriter, u64)>,
+    /// `walls.csv`: per macro-step, the force of the grains on every wall and where the wall
+    /// is (force–displacement curves of plates, penetrometers, drums).
+    walls_log: Option<std::io::BufWriter<std::fs::File>>,
     /// Kinetic energy above which the run is declared runaway [J].
     energy_bound: f64,
 }
 
 impl<S: Space> DemSolver<S> {
-    pub fn new(scene: &Scene, state: DemState<S>, frames: Option<FrameWriter>) -> anyhow::Result<Self> {
+    pub fn new(scene: &Scene, state: DemState<S>, out_dir: Option<&std::path::Path>) -> anyhow::Result<Self> {
         let pipeline = DemPipeline::new(scene.threads as usize)?;
         let energy_bound = runaway_bound(scene, &state);
+        let frames = match out_dir {
+            Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir)?),
+            _ => None,
+        };
+        let walls_log = match out_dir {
+            Some(dir) if !state.walls.is_empty() => {
+                use std::io::Write as _;
+                let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("walls.csv"))?);
+                let mut header = String::from("step,time");
+                for k in 0..state.walls.len() {
+                    header.push_str(&format!(",wall{k}_fx,wall{k}_fy,wall{k}_fz,wall{k}_x,wall{k}_y,wall{k}_z"));
+                }
+                writeln!(f, "{header}")?;
+                Some(f)
+            }
+            _ => None,
+        };
         let mut solver = DemSolver {
             state,
             pipeline,
             substeps: scene.coupling.substeps,
-            frames: frames
-                .filter(|_| scene.output.frames_every > 0)
-                .map(|f| (f, scene.output.frames_every)),
+            frames: frames.map(|f| (f, scene.output.frames_every)),
+            walls_log,
             energy_bound,
         };
         if let Some((f, _)) = &mut solver.frames {
@@ -99,6 +118,23 @@ impl<S: Space> Solver for DemSolver<S> {
         let dt = window.dt / self.substeps as f64;
         self.pipeline.run(&mut self.state, dt, self.substeps as usize);
         self.check(window.step, dt)?;
+        if let Some(log) = &mut self.walls_log {
+            use std::io::Write as _;
+            let mut row = format!("{},{}", window.step, self.state.time);
+            for w in &self.state.walls {
+                let f = S::to_array(w.load);
+                let at = S::to_array(match w.shape {
+                    WallShape::Plane { point, .. } => point,
+                    WallShape::Drum { center, .. } => center,
+                    WallShape::Segment { a, .. } => a,
+                });
+                row.push_str(&format!(",{},{},{},{},{},{}", f[0], f[1], f[2], at[0], at[1], at[2]));
+            }
+            writeln!(log, "{row}")?;
+            if window.step.is_multiple_of(100) {
+                log.flush()?;
+            }
+        }
         if let Some((f, every)) = &mut self.frames
             && window.step.is_multiple_of(*every)
         {
