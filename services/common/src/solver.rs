@@ -22,6 +22,18 @@ pub struct StepWindow {
     pub substeps: u32,
 }
 
+impl StepWindow {
+    /// Macro-step `step` (from 1) of a scene.
+    pub fn of(scene: &Scene, step: u64) -> Self {
+        StepWindow {
+            step,
+            time: (step - 1) as f64 * scene.dt,
+            dt: scene.dt,
+            substeps: scene.coupling.substeps,
+        }
+    }
+}
+
 /// What a solver reports after each step (the physics half of [`Summary`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SolverReport {
@@ -158,12 +170,7 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
         if !clock.obey_control(session, &mut control)? {
             break;
         }
-        let window = StepWindow {
-            step,
-            time: (step - 1) as f64 * scene.dt,
-            dt: scene.dt,
-            substeps: scene.coupling.substeps,
-        };
+        let window = StepWindow::of(scene, step);
         let t = Instant::now();
         solver.step_alone(&window)?;
         publish_summary(session, &mut summary_pub, &window, &solver.report(), t.elapsed(), Duration::ZERO)?;

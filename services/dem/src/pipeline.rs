@@ -215,9 +215,7 @@ impl<S: Space> DemPipeline<S> {
                 if frozen {
                     return 0.0;
                 }
-                let inv_m = 1.0 / (m * s);
-                *v += (f.force + ext) * (h * inv_m) + gravity * h;
-                *w += f.torque * (h * inv_m / (S::INERTIA_FACTOR * r * r));
+                half_kick::<S>(v, w, f, ext, gravity, m * s, r, h);
                 *x += *v * dt;
                 *rot = S::rotate(*rot, *w, dt);
                 if any_periodic {
@@ -388,9 +386,7 @@ impl<S: Space> DemPipeline<S> {
                 if frozen || h == 0.0 {
                     return;
                 }
-                let inv_m = 1.0 / (m * s);
-                *v += (total.force + ext) * (h * inv_m) + gravity * h;
-                *w += total.torque * (h * inv_m / (S::INERTIA_FACTOR * r * r));
+                half_kick::<S>(v, w, &total, ext, gravity, m * s, r, h);
             });
 
         // Loads on walls: the opposite of their contact forces, summed in list order.
@@ -461,6 +457,15 @@ impl<S: Space> DemPipeline<S> {
             .find(|&i| !g.x[i].is_finite() || !g.v[i].is_finite() || !g.omega[i].is_finite())
             .map(|i| g.id[i])
     }
+}
+
+/// v += h (F + F_ext)/m' + h g, ω += h τ / I' with I' = (I/(m r²)) m' r² (m' scaled mass).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn half_kick<S: Space>(v: &mut S::V, w: &mut S::Ang, f: &GrainForce<S>, ext: S::V, gravity: S::V, mass: f64, r: f64, h: f64) {
+    let inv_m = 1.0 / mass;
+    *v += (f.force + ext) * (h * inv_m) + gravity * h;
+    *w += f.torque * (h * inv_m / (S::INERTIA_FACTOR * r * r));
 }
 
 fn mass_or_inf<S: Space>(g: &crate::state::Grains<S>, i: usize) -> f64 {

@@ -46,12 +46,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         if !clock.obey_control(&session, &mut control)? {
             break;
         }
-        let window = StepWindow {
-            step,
-            time: (step - 1) as f64 * scene.dt,
-            dt: scene.dt,
-            substeps: scene.coupling.substeps,
-        };
+        let window = StepWindow::of(scene, step);
         let header = session.header(step, window.time, window.dt);
         step_pub.publish(1, |h, out| {
             *h = header;
