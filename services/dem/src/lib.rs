@@ -1,6 +1,7 @@
 //! DEM of grains: 2D disks and 3D spheres (Yue 2018 §3.2, Chen 2021 §2.1).
 //!
-//! - [`space`]: the dimension as a type ([`space::D2`], [`space::D3`]) so 2D and 3D share kernels;
+//! - [`space`] (from `grains-grid`): the dimension as a type ([`space::D2`], [`space::D3`]) so
+//!   2D and 3D share kernels;
 //! - [`state`]: plain data — [`state::Grains`] (structure of arrays), walls, domain, parameters;
 //! - [`contact`]: the contact law kernels (normal spring–dashpot from restitution, tangential
 //!   anchor spring with the Coulomb cap, cohesion);
@@ -14,8 +15,10 @@ pub mod contact;
 pub mod neighbors;
 pub mod packing;
 pub mod pipeline;
-pub mod space;
 pub mod state;
+
+/// The dimension as a type, shared with every service (`grains-grid`).
+pub use grains_grid::space;
 
 pub use contact::ContactParams;
 pub use pipeline::DemPipeline;

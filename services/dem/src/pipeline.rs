@@ -77,6 +77,10 @@ impl std::error::Error for BuildError {}
 /// Grains per task in the per-grain passes (small systems stay on one thread).
 const GRAIN_TASK: usize = 4096;
 
+/// Fewest pairs worth a range of their own (a thread's wake-up costs tens of µs here, the
+/// force of a pair tens of ns).
+const PAIRS_PER_RANGE: usize = 8_192;
+
 /// Re-sort the grains by cell at every this many neighbour-list builds.
 const SORT_EVERY: u64 = 20;
 
@@ -253,7 +257,8 @@ impl<S: Space> DemPipeline<S> {
         let damping: Vec<f64> = materials.iter().map(ContactParams::damping_factor).collect();
         let (period, half) = periods(state);
         let pairs = &mut self.neighbors.pairs;
-        let ranges = self.threads.min(pairs.len().div_ceil(2048)).max(1);
+        // A range must carry enough pairs to pay for waking a worker (tens of µs on a VM).
+        let ranges = self.threads.min(pairs.len() / PAIRS_PER_RANGE).max(1);
         let range_len = pairs.len().div_ceil(ranges).max(1);
         self.partial.resize_with(ranges, || (0, Vec::new()));
         self.partial.truncate(ranges);

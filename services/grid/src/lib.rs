@@ -1,0 +1,13 @@
+//! Shared numerics of grains, in one place for every service (DESIGN §3):
+//!
+//! - [`space`]: the dimension as a type (`D2`, `D3`) over glam vectors, so that 2D and 3D
+//!   share kernels;
+//! - [`shape`]: the background grid and its shape functions — GIMP (Bardenhagen & Kober 2004,
+//!   as Yue 2018 §3.4 uses it, particle width = cell width / points per cell) and quadratic
+//!   B-splines — through which the MPM transfers, and the DEM and the coupler rasterize.
+
+pub mod shape;
+pub mod space;
+
+pub use shape::{Grid, Kernel};
+pub use space::{D2, D3, Space, Vector};
