@@ -183,10 +183,10 @@ mod tests {
             assert!((sw - 1.0).abs() < 1e-12, "{kernel:?} Σw = {sw} at {p:?}");
             assert!((swx - x).length() < 1e-12, "{kernel:?} Σ w x_i at {p:?}");
             assert!(sg.length() < 1e-9, "{kernel:?} Σ∇w = {sg:?}");
-            for r in 0..S::DIM {
-                for c in 0..S::DIM {
+            for (r, row) in sgx.iter().enumerate().take(S::DIM) {
+                for (c, value) in row.iter().enumerate().take(S::DIM) {
                     let want = if r == c { 1.0 } else { 0.0 };
-                    assert!((sgx[r][c] - want).abs() < 1e-9, "{kernel:?} Σ ∇w x_i [{r}][{c}] = {}", sgx[r][c]);
+                    assert!((value - want).abs() < 1e-9, "{kernel:?} Σ ∇w x_i [{r}][{c}] = {value}");
                 }
             }
         }
