@@ -145,6 +145,8 @@ pub struct Body {
     /// A packing (LAMMPS data file, e.g. written by `grains pack`) whose grains inside the
     /// shape make up the body, instead of a fresh lattice. Relative to the scene file.
     pub packing: Option<PathBuf>,
+    /// Grains that never move but push (a rough base of glued grains). DEM bodies only.
+    pub frozen: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -777,11 +779,23 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 Some(path)
             }
         };
+        if let Some(fz) = &b.frozen
+            && *fz.get_ref()
+            && model != Model::Dem
+        {
+            return Err(ctx.err(
+                Some(fz.span()),
+                Some(&f("frozen")),
+                "only a model = \"dem\" body can be frozen".into(),
+            ));
+        }
+        let frozen = b.frozen.as_ref().is_some_and(|fz| *fz.get_ref());
         bodies.push(Body {
             material,
             model,
             shape,
             packing,
+            frozen,
         });
     }
 
@@ -1164,6 +1178,7 @@ pub mod raw {
         pub center: Option<Spanned<Vec<f64>>>,
         pub radius: Option<Spanned<f64>>,
         pub packing: Option<Spanned<String>>,
+        pub frozen: Option<Spanned<bool>>,
     }
 
     #[derive(Deserialize)]

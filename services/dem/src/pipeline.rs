@@ -15,7 +15,7 @@
 //! The pipeline owns scratch only (forces, the neighbour list, the thread pool); the state is
 //! passed in.
 
-use crate::contact::{ContactParams, contact_force, reduced_mass};
+use crate::contact::{ContactParams, Damping, contact_force, reduced_mass};
 use crate::neighbors::{NeighborList, PairSlot, periods, separation, wall_gap, wall_geometry};
 use crate::space::{Space, Vector};
 use crate::state::{DemState, WallShape};
@@ -291,8 +291,11 @@ impl<S: Space> DemPipeline<S> {
                 let v_rel = (gi.v + S::ang_cross(gi.omega, nrm * -ri)) - (gj.v + S::ang_cross(gj.omega, nrm * rj));
                 let mat = gi.material as usize;
                 let scale = 0.5 * (gi.scale + gj.scale);
-                let m_red = reduced_mass(gi.mass, gj.mass);
-                let gamma = materials[mat].gamma(damping[mat], m_red) * scale;
+                // The reduced mass (a division) only matters for restitution damping.
+                let gamma = match materials[mat].damping {
+                    Damping::Viscous(g) => g,
+                    Damping::Restitution(_) => damping[mat] * reduced_mass(gi.mass, gj.mass).sqrt(),
+                } * scale;
                 let c = contact_force::<S>(&materials[mat], r_sum - dist, nrm, v_rel, gamma, scale, dt, &mut p.state);
                 if !c.active {
                     continue;

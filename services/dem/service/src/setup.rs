@@ -132,7 +132,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
                     let i = state
                         .grains
                         .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
-                    state.grains.frozen[i] = a.kind == 2;
+                    state.grains.frozen[i] = a.kind == 2 || body.frozen;
                     next_id += 1;
                 }
             }
@@ -146,9 +146,10 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
             }
             let r = radius(&mut rng, dem.radius, dem.radius_std);
             from_packing.push(false);
-            state
+            let i = state
                 .grains
                 .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
+            state.grains.frozen[i] = body.frozen;
             next_id += 1;
         }
     }
