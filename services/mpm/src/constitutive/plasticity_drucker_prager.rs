@@ -1,0 +1,193 @@
+//! Yue 2018 §3.3: elasticity on the elastic left Cauchy–Green strain `b^e`, Drucker–Prager
+//! yield, a volume-preserving return mapping, free flow under extension.
+//!
+//! Symbols (d = 2 or 3): κ bulk and μ shear modulus [Pa], α the friction coefficient of the
+//! yield surface, J^e = √det b^e, b̄ = det(b^e)^(−1/d) b^e.
+//! - Kirchhoff stress (eq. 10): τ = κ/2 (J^e² − 1) I + μ dev b̄.
+//! - Yield (eq. 11): Φ = s − α p with s = ‖dev τ‖ = μ ‖dev b̄‖ and p = −tr τ / d = −κ/2 (J^e² − 1).
+//! - Return mapping (eqs. 12–17): b^{e,p} = λ₁ I + λ₂ dev b^{e,*} with det b^{e,p} = det b^{e,*}
+//!   (plastic flow keeps the volume) and Φ(b^{e,p}) = 0 (λ₂ from eq. 13, written here with the
+//!   b̄ normalization the stress uses; λ₁ from eq. 16 in 2D and from the cubic eq. 17 in 3D by
+//!   Cardano's method).
+//! - Free flow (extension cannot be resisted): det b^e > 1 ⇒ b^e ← det(b^e)^(−1/d) b^e.
+
+use crate::matrix::Matrix;
+
+/// Material constants of the model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DruckerPragerYue {
+    /// Bulk modulus κ [Pa].
+    pub bulk: f64,
+    /// Shear modulus μ [Pa].
+    pub shear: f64,
+    /// Yield slope α (sets the angle of repose).
+    pub alpha: f64,
+}
+
+impl DruckerPragerYue {
+    /// From Young's modulus, Poisson's ratio and a friction angle φ [degrees]. With
+    /// Φ = ‖dev τ‖ − α p: α = √2 sin φ in 2D (Mohr–Coulomb in the plane: max shear = p sin φ),
+    /// α = 2√6 sin φ / (3 − sin φ) in 3D (the cone through Mohr–Coulomb's compression corners).
+    pub fn new(young: f64, poisson: f64, friction_angle_deg: f64, dim: usize) -> Self {
+        let bulk = young / (dim as f64 * (1.0 - (dim as f64 - 1.0) * poisson));
+        let shear = young / (2.0 * (1.0 + poisson));
+        let s = friction_angle_deg.to_radians().sin();
+        let alpha = if dim == 2 {
+            std::f64::consts::SQRT_2 * s
+        } else {
+            2.0 * 6f64.sqrt() * s / (3.0 - s)
+        };
+        DruckerPragerYue { bulk, shear, alpha }
+    }
+}
+
+fn bar<M: Matrix>(b: &M) -> M {
+    *b * b.det().powf(-1.0 / M::DIM as f64)
+}
+
+/// Kirchhoff stress τ of an elastic strain b^e (eq. 10).
+pub fn kirchhoff<M: Matrix>(m: &DruckerPragerYue, b: &M) -> M {
+    let j2 = b.det();
+    M::identity() * (0.5 * m.bulk * (j2 - 1.0)) + bar(b).dev() * m.shear
+}
+
+/// Pressure p = −tr τ / d [Pa] (positive in compression).
+pub fn pressure<M: Matrix>(m: &DruckerPragerYue, b: &M) -> f64 {
+    -0.5 * m.bulk * (b.det() - 1.0)
+}
+
+/// Yield function Φ = ‖dev τ‖ − α p (eq. 11); the state is admissible when Φ ≤ 0.
+pub fn yield_function<M: Matrix>(m: &DruckerPragerYue, b: &M) -> f64 {
+    m.shear * bar(b).dev().norm() - m.alpha * pressure(m, b)
+}
+
+/// Free flow: a strain in extension (det b^e > 1) is projected to det b^e = 1, which makes
+/// the pressure zero.
+pub fn free_flow<M: Matrix>(b: &M) -> M {
+    let det = b.det();
+    if det > 1.0 { bar(b) } else { *b }
+}
+
+/// The volume-preserving return mapping (eqs. 12–17): an admissible state is returned
+/// unchanged; otherwise the state on the yield surface with the same det and the same
+/// deviatoric direction.
+pub fn return_map<M: Matrix>(m: &DruckerPragerYue, b_star: &M) -> M {
+    let b = free_flow(b_star);
+    if yield_function(m, &b) <= 0.0 {
+        return b;
+    }
+    let det = b.det();
+    let dev = b.dev();
+    let dev_norm = dev.norm();
+    if dev_norm == 0.0 {
+        return b;
+    }
+    // Φ = μ det^(−1/d) λ₂ ‖dev b*‖ − α p(det) = 0  (the pressure depends on det only, kept).
+    let lambda2 = m.alpha * pressure(m, &b) * det.powf(1.0 / M::DIM as f64) / (m.shear * dev_norm);
+    let lambda1 = if M::DIM == 2 {
+        // det(λ₁ I + λ₂ D) = λ₁² + λ₂² det D for traceless 2×2 D (eq. 16).
+        (det - lambda2 * lambda2 * dev.det()).sqrt()
+    } else {
+        // λ₁³ − (λ₂² ‖D‖²/2) λ₁ + (λ₂³ det D − det) = 0 (eq. 17).
+        cardano_largest_root(-0.5 * lambda2 * lambda2 * dev_norm * dev_norm, lambda2.powi(3) * dev.det() - det)
+    };
+    M::identity() * lambda1 + dev * lambda2
+}
+
+/// The largest real root of the depressed cubic x³ + p x + q = 0 (Cardano; trigonometric
+/// form when there are three real roots), polished by one Newton step against the
+/// cancellation of the closed form.
+pub fn cardano_largest_root(p: f64, q: f64) -> f64 {
+    let disc = (q / 2.0).powi(2) + (p / 3.0).powi(3);
+    let x = if disc >= 0.0 {
+        let s = disc.sqrt();
+        (-q / 2.0 + s).cbrt() + (-q / 2.0 - s).cbrt()
+    } else {
+        let r = (-p / 3.0).sqrt();
+        let phi = ((-q / 2.0) / r.powi(3)).clamp(-1.0, 1.0).acos();
+        2.0 * r * (phi / 3.0).cos()
+    };
+    let slope = 3.0 * x * x + p;
+    if slope != 0.0 { x - (x * x * x + p * x + q) / slope } else { x }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DMat2, DMat3, DVec2, DVec3};
+
+    fn material(dim: usize) -> DruckerPragerYue {
+        DruckerPragerYue::new(1e6, 0.3, 30.0, dim)
+    }
+
+    /// Symmetric positive-definite strains in compression with a large shear: far outside
+    /// the yield surface.
+    fn strained2(k: usize) -> DMat2 {
+        let t = k as f64 * 0.37;
+        let (a, b, c) = (0.95 - 0.01 * (k % 3) as f64, 0.99 + 0.002 * (k % 5) as f64, 0.04 + 0.01 * t.sin());
+        DMat2::from_cols(DVec2::new(a, c), DVec2::new(c, b))
+    }
+
+    fn strained3(k: usize) -> DMat3 {
+        let t = k as f64 * 0.37;
+        let (a, b, c) = (0.90 + 0.005 * (k % 4) as f64, 0.985, 1.03 - 0.003 * (k % 3) as f64);
+        let (d, e, f) = (0.04 * t.cos(), 0.03 * t.sin(), 0.02);
+        DMat3::from_cols(DVec3::new(a, d, e), DVec3::new(d, b, f), DVec3::new(e, f, c))
+    }
+
+    #[test]
+    fn return_mapping_lands_on_the_yield_surface_and_keeps_the_volume() {
+        for k in 0..50 {
+            let (m2, m3) = (material(2), material(3));
+            let b = strained2(k);
+            assert!(yield_function(&m2, &b) > 0.0, "test state {k} must violate the yield condition");
+            let r = return_map(&m2, &b);
+            let scale = m2.alpha * pressure(&m2, &b).abs();
+            assert!(yield_function(&m2, &r).abs() < 1e-8 * scale, "2D Φ = {}", yield_function(&m2, &r));
+            assert!((r.det() - b.det()).abs() < 1e-12, "2D volume: {} vs {}", r.det(), b.det());
+
+            let b = strained3(k);
+            assert!(yield_function(&m3, &b) > 0.0, "3D test state {k} must violate the yield condition");
+            let r = return_map(&m3, &b);
+            let scale = m3.alpha * pressure(&m3, &b).abs();
+            assert!(yield_function(&m3, &r).abs() < 1e-8 * scale, "3D Φ = {}", yield_function(&m3, &r));
+            assert!((r.det() - b.det()).abs() < 1e-12, "3D volume: {} vs {}", r.det(), b.det());
+            // Idempotent: a state on the surface stays.
+            assert!((return_map(&m3, &r) - r).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn admissible_states_are_untouched_and_extension_flows_freely() {
+        let m = material(2);
+        let b = DMat2::from_diagonal(DVec2::new(0.999, 0.999));
+        assert_eq!(return_map(&m, &b), b);
+        let stretched = DMat2::from_cols(DVec2::new(1.02, 0.01), DVec2::new(0.01, 1.03));
+        let r = free_flow(&stretched);
+        assert!((r.det() - 1.0).abs() < 1e-14 && pressure(&m, &r).abs() < 1e-6);
+    }
+
+    #[test]
+    fn cardano_matches_a_numerical_root() {
+        for (p, q) in [(-3.0, 1.0), (-0.5, -1.0), (0.2, -2.0), (-1e-3, -0.98), (-2.0, 0.0)] {
+            let x = cardano_largest_root(p, q);
+            let f = |x: f64| x * x * x + p * x + q;
+            // Bisection on [x − 1, x + 1] for the largest sign change confirms the root.
+            let (mut lo, mut hi) = (x - 0.5, 10.0);
+            assert!(f(hi) > 0.0);
+            if f(lo) > 0.0 {
+                lo = x - 1e-9;
+            }
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if f(mid) > 0.0 { hi = mid } else { lo = mid }
+            }
+            assert!((x - 0.5 * (lo + hi)).abs() < 1e-9, "p {p} q {q}: {x} vs {}", 0.5 * (lo + hi));
+            assert!(
+                f(x).abs() < 1e-12 * (x.abs().powi(3) + (p * x).abs() + q.abs()),
+                "residual {}",
+                f(x)
+            );
+        }
+    }
+}
