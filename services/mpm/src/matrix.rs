@@ -47,3 +47,45 @@ impl Matrix for DMat3 {
         (self.x_axis.length_squared() + self.y_axis.length_squared() + self.z_axis.length_squared()).sqrt()
     }
 }
+
+/// A dimension with its matrix type: what the MPM kernels need beyond vectors.
+pub trait MpmSpace: grains_grid::Space {
+    type M: Matrix;
+    /// a ⊗ b (a bᵀ).
+    fn outer(a: Self::V, b: Self::V) -> Self::M;
+    fn mul_vec(m: &Self::M, v: Self::V) -> Self::V;
+    fn mul(a: &Self::M, b: &Self::M) -> Self::M;
+    fn transpose(m: &Self::M) -> Self::M;
+}
+
+impl MpmSpace for grains_grid::D2 {
+    type M = DMat2;
+    fn outer(a: glam::DVec2, b: glam::DVec2) -> DMat2 {
+        DMat2::from_cols(a * b.x, a * b.y)
+    }
+    fn mul_vec(m: &DMat2, v: glam::DVec2) -> glam::DVec2 {
+        *m * v
+    }
+    fn mul(a: &DMat2, b: &DMat2) -> DMat2 {
+        *a * *b
+    }
+    fn transpose(m: &DMat2) -> DMat2 {
+        m.transpose()
+    }
+}
+
+impl MpmSpace for grains_grid::D3 {
+    type M = DMat3;
+    fn outer(a: glam::DVec3, b: glam::DVec3) -> DMat3 {
+        DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+    }
+    fn mul_vec(m: &DMat3, v: glam::DVec3) -> glam::DVec3 {
+        *m * v
+    }
+    fn mul(a: &DMat3, b: &DMat3) -> DMat3 {
+        *a * *b
+    }
+    fn transpose(m: &DMat3) -> DMat3 {
+        m.transpose()
+    }
+}
