@@ -7,6 +7,7 @@ pub trait Matrix: Copy + std::fmt::Debug + PartialEq + Add<Output = Self> + Sub<
     const DIM: usize;
     fn identity() -> Self;
     fn det(&self) -> f64;
+    fn inverse(&self) -> Self;
     fn trace(&self) -> f64;
     /// Frobenius norm.
     fn norm(&self) -> f64;
@@ -24,6 +25,9 @@ impl Matrix for DMat2 {
     fn det(&self) -> f64 {
         self.determinant()
     }
+    fn inverse(&self) -> Self {
+        DMat2::inverse(self)
+    }
     fn trace(&self) -> f64 {
         self.x_axis.x + self.y_axis.y
     }
@@ -39,6 +43,9 @@ impl Matrix for DMat3 {
     }
     fn det(&self) -> f64 {
         self.determinant()
+    }
+    fn inverse(&self) -> Self {
+        DMat3::inverse(self)
     }
     fn trace(&self) -> f64 {
         self.x_axis.x + self.y_axis.y + self.z_axis.z

@@ -30,6 +30,8 @@ pub struct Points<S: MpmSpace> {
     pub b_e: Vec<S::M>,
     /// Hybrid weight w of mass and stress (1 outside a hybrid zone).
     pub weight: Vec<f64>,
+    /// APIC affine velocity C (zero unless the transfer is APIC).
+    pub affine: Vec<S::M>,
 }
 
 impl<S: MpmSpace> Points<S> {
@@ -40,6 +42,7 @@ impl<S: MpmSpace> Points<S> {
         self.volume.push(volume);
         self.b_e.push(S::M::identity());
         self.weight.push(1.0);
+        self.affine.push(S::M::identity() * 0.0);
     }
 
     pub fn len(&self) -> usize {
@@ -51,6 +54,15 @@ impl<S: MpmSpace> Points<S> {
     }
 }
 
+/// Grid-to-point velocity transfer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Transfer {
+    /// PIC/FLIP blend with FLIP share β (1 = pure FLIP, 0 = PIC).
+    Flip(f64),
+    /// Affine particle-in-cell (Jiang et al. 2015): conserves angular momentum.
+    Apic,
+}
+
 /// Parameters of a step.
 #[derive(Clone, Copy, Debug)]
 pub struct MpmParams<S: Space> {
@@ -58,8 +70,8 @@ pub struct MpmParams<S: Space> {
     pub kernel: Kernel,
     pub material: DruckerPragerYue,
     pub gravity: S::V,
-    /// FLIP share β of the velocity update (1 = pure FLIP, 0 = PIC).
-    pub flip: f64,
+    /// How velocities go back to the points.
+    pub transfer: Transfer,
     /// Plastic flow on (Drucker–Prager return mapping and free flow under extension); off,
     /// the same elasticity without yield (for elastic checks).
     pub plastic: bool,
@@ -101,11 +113,17 @@ impl<S: MpmSpace> MpmPipeline<S> {
             let (m, w) = (pts.mass[p] * pts.weight[p], pts.weight[p]);
             // Kirchhoff stress with the reference volume: f_i = −Σ V0 τ ∇w_ip.
             let tau = kirchhoff(&params.material, &pts.b_e[p]) * (pts.volume[p] * w);
-            let v = pts.v[p];
-            for_each_node::<S>(&params.grid, params.kernel, pts.x[p], |node, wip, grad| {
+            let (v, xp, c) = (pts.v[p], pts.x[p], pts.affine[p]);
+            let apic = params.transfer == Transfer::Apic;
+            for_each_node::<S>(&params.grid, params.kernel, xp, |node, wip, grad| {
                 let i = node as usize;
                 self.mass[i] += m * wip;
-                self.momentum[i] += v * (m * wip);
+                let vi = if apic {
+                    v + S::mul_vec(&c, S::from_array(params.grid.position(params.grid.ijk(node))) - xp)
+                } else {
+                    v
+                };
+                self.momentum[i] += vi * (m * wip);
                 force[i] -= S::mul_vec(&tau, grad);
             });
         }
@@ -144,15 +162,28 @@ impl<S: MpmSpace> MpmPipeline<S> {
         for p in 0..pts.len() {
             let mut v_pic = S::V::default();
             let mut dv = S::V::default();
-            let mut grad_v = S::outer(S::V::default(), S::V::default());
-            for_each_node::<S>(&params.grid, params.kernel, pts.x[p], |node, wip, grad| {
+            let zero = S::outer(S::V::default(), S::V::default());
+            let (mut grad_v, mut b, mut d) = (zero, zero, zero);
+            let xp = pts.x[p];
+            for_each_node::<S>(&params.grid, params.kernel, xp, |node, wip, grad| {
                 let i = node as usize;
                 v_pic += self.velocity[i] * wip;
                 dv += (self.velocity[i] - self.velocity_old[i]) * wip;
                 grad_v = grad_v + S::outer(self.velocity[i], grad);
+                if params.transfer == Transfer::Apic {
+                    let r = S::from_array(params.grid.position(params.grid.ijk(node))) - xp;
+                    b = b + S::outer(self.velocity[i], r) * wip;
+                    d = d + S::outer(r, r) * wip;
+                }
             });
-            let v_flip = pts.v[p] + dv;
-            pts.v[p] = v_flip * params.flip + v_pic * (1.0 - params.flip);
+            match params.transfer {
+                Transfer::Flip(beta) => pts.v[p] = (pts.v[p] + dv) * beta + v_pic * (1.0 - beta),
+                Transfer::Apic => {
+                    pts.v[p] = v_pic;
+                    // C = B D⁻¹ (D is h²/4 I for quadratic B-splines; computed for GIMP).
+                    pts.affine[p] = S::mul(&b, &d.inverse());
+                }
+            }
             let step = S::M::identity() + grad_v * dt;
             let b = S::mul(&S::mul(&step, &pts.b_e[p]), &S::transpose(&step));
             pts.b_e[p] = if params.plastic { return_map(&params.material, &b) } else { b };
