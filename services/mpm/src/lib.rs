@@ -5,9 +5,9 @@
 //!   Drucker–Prager yield (eq. 11), volume-preserving return mapping (eqs. 12–17, Cardano in
 //!   3D) and free flow under extension;
 //! - [`pipeline`]: the explicit step in two phases (Alg. 20/21) over a dense grid with GIMP or
-//!   quadratic B-spline weights from `grains-grid`, PIC/FLIP.
+//!   quadratic B-spline weights from `grains-grid`, PIC/FLIP or APIC.
 //!
-//! Not yet: Chen 2021's Hencky / critical-state model, APIC, sparse grid blocks, rayon,
+//! Not yet: Chen 2021's Hencky / critical-state model, sparse grid blocks, rayon,
 //! traction boundaries, the stability checks and the service.
 
 pub mod constitutive;
