@@ -3,6 +3,7 @@
 use glam::DVec2;
 use grains_grid::{D2, Grid, Kernel};
 use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
+use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{MpmParams, MpmPipeline, Points, Transfer, cfl_time_step, point_totals};
 
 fn block(lo: [f64; 2], hi: [f64; 2], h: f64, ppc: usize, density: f64) -> Points<D2> {
@@ -34,6 +35,28 @@ fn params(grid: Grid, h: f64, ppc: usize, material: DruckerPragerYue) -> MpmPara
         plastic: false,
         wall_cells: 0,
     }
+}
+
+/// Frequency of the first axial mode of a bar, from the zero crossings of the mean x
+/// velocity of its left end (points with x below `left_edge`): v_end = v0 cos(ωt) crosses zero
+/// at T/4, 3T/4, 5T/4, …, so crossings 1 and 3 are one period apart.
+fn axial_frequency<S: MpmSpace>(pts: &mut Points<S>, p: &MpmParams<S>, left_edge: f64, dt: f64, steps: usize) -> f64 {
+    let left: Vec<usize> = (0..pts.len()).filter(|&k| S::component(pts.x[k], 0) < left_edge).collect();
+    let end_velocity = |pts: &Points<S>| left.iter().map(|&k| S::component(pts.v[k], 0)).sum::<f64>() / left.len() as f64;
+    let mut pipe = MpmPipeline::<S>::new();
+    let mut crossings = Vec::new();
+    let mut last = end_velocity(pts);
+    for s in 1..=steps {
+        pipe.step(pts, p, dt);
+        let now = end_velocity(pts);
+        if (now > 0.0) != (last > 0.0) {
+            // Linear interpolation of the crossing time.
+            crossings.push((s as f64 - now / (now - last)) * dt);
+        }
+        last = now;
+    }
+    assert!(crossings.len() >= 4, "{crossings:?}");
+    1.0 / (crossings[3] - crossings[1])
 }
 
 /// P2G conserves mass and momentum to round-off (the weights are a partition of unity).
@@ -97,25 +120,7 @@ fn elastic_bar_vibrates_at_c_over_2l() {
     let p = params(grid, h, 2, material);
     let c = (young / density).sqrt();
     let dt = 0.2 * cfl_time_step(&material, density, h);
-    let mut pipe = MpmPipeline::<D2>::new();
-    let left: Vec<usize> = (0..pts.len()).filter(|&k| pts.x[k].x < x0 + 0.5 * h).collect();
-    let end_velocity = |pts: &Points<D2>| left.iter().map(|&k| pts.v[k].x).sum::<f64>() / left.len() as f64;
-    let mut crossings = Vec::new();
-    let mut last = end_velocity(&pts);
-    let steps = (2.2 * 2.0 * len / c / dt) as usize;
-    for s in 1..=steps {
-        pipe.step(&mut pts, &p, dt);
-        let now = end_velocity(&pts);
-        if (now > 0.0) != (last > 0.0) {
-            // Linear interpolation of the crossing time.
-            crossings.push((s as f64 - now / (now - last)) * dt);
-        }
-        last = now;
-    }
-    assert!(crossings.len() >= 4, "{crossings:?}");
-    // v_end = v0 cos(ωt) crosses zero at T/4, 3T/4, 5T/4, …: crossings 1 and 3 are T apart.
-    let period = crossings[3] - crossings[1];
-    let f = 1.0 / period;
+    let f = axial_frequency(&mut pts, &p, x0 + 0.5 * h, dt, (2.2 * 2.0 * len / c / dt) as usize);
     let expected = c / (2.0 * len);
     assert!(
         (f - expected).abs() / expected < 0.02,
@@ -202,22 +207,7 @@ fn elastic_bar_vibrates_at_c_over_2l_in_3d() {
     // ν = 0 in 3D: κ = E/3, μ = E/2; the uniaxial stress modulus of a free rod is E.
     let c = (young / density).sqrt();
     let dt = 0.2 * cfl_time_step(&material, density, h);
-    let mut pipe = MpmPipeline::<D3>::new();
-    let left: Vec<usize> = (0..pts.len()).filter(|&k| pts.x[k].x < x0 + 0.5 * h).collect();
-    let end_velocity = |pts: &Points<D3>| left.iter().map(|&k| pts.v[k].x).sum::<f64>() / left.len() as f64;
-    let mut crossings = Vec::new();
-    let mut last = end_velocity(&pts);
-    let steps = (2.2 * 2.0 * len / c / dt) as usize;
-    for s in 1..=steps {
-        pipe.step(&mut pts, &p, dt);
-        let now = end_velocity(&pts);
-        if (now > 0.0) != (last > 0.0) {
-            crossings.push((s as f64 - now / (now - last)) * dt);
-        }
-        last = now;
-    }
-    assert!(crossings.len() >= 4, "{crossings:?}");
-    let f = 1.0 / (crossings[3] - crossings[1]);
+    let f = axial_frequency(&mut pts, &p, x0 + 0.5 * h, dt, (2.2 * 2.0 * len / c / dt) as usize);
     let expected = c / (2.0 * len);
     assert!(
         (f - expected).abs() / expected < 0.02,
