@@ -97,8 +97,8 @@ fn main() -> ExitCode {
         }
         Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
         Cmd::Check { scene } => grains_protocol::scene::load(&scene).map_err(anyhow::Error::from).and_then(|s| {
-            if s.synthetic.is_none() && s.participants() == [Role::Dem] {
-                grains_dem_service::check_scene(&s)?;
+            if s.synthetic.is_none() {
+                grains_launch::run::check_physics(&s)?;
             }
             let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
             println!(

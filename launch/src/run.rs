@@ -83,6 +83,26 @@ pub struct RunOutcome {
 #[derive(Debug)]
 pub struct BadInput(pub String);
 
+/// What the solvers need of a physics scene, checked before anything starts: the participants
+/// this build can run, then each solver's own checks (time steps against their limits).
+pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
+    let roles = scene.participants();
+    match roles.as_slice() {
+        [Role::Dem] => grains_dem_service::check_scene(scene)?,
+        [Role::Mpm] => grains_mpm_service::check_scene(scene)?,
+        _ => {
+            let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
+            bail!(BadInput(format!(
+                "{}: this scene needs {}; this build runs DEM-only and MPM-only scenes (coupling comes with the next issue): \
+                 give every body model = \"dem\", or every body model = \"mpm\"",
+                scene.path.display(),
+                list.join(", ")
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl std::fmt::Display for BadInput {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.0)
@@ -134,16 +154,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     };
     let roles = scene.participants();
     if scene.synthetic.is_none() {
-        if roles != [Role::Dem] {
-            let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
-            bail!(BadInput(format!(
-                "{}: this scene needs {}; this build has the DEM solver only (MPM and coupling come with the next issues): \
-                 give every body model = \"dem\"",
-                scene.path.display(),
-                list.join(", ")
-            )));
-        }
-        grains_dem_service::check_scene(&scene)?;
+        check_physics(&scene)?;
     }
     for e in &opts.external {
         if !roles.contains(e) {

@@ -99,19 +99,62 @@ pub struct DemMaterial {
     pub cohesion_tangential: f64,
 }
 
+/// The continuum's constitutive model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MpmModel {
+    /// Yue 2018 §3.3: b^e elasticity, Drucker–Prager, volume-preserving return, free flow.
+    DruckerPrager,
+    /// Chen 2021 §2.2: Hencky elasticity, cohesive Drucker–Prager with critical-state
+    /// softening: tan φ = tan φ_cs + χ (Φ − Φ_cs), dΦ/dt = −ξ Φ (Φ − Φ_cs) ‖ε̇^p‖.
+    CriticalState {
+        /// Critical packing fraction Φ_cs.
+        packing_critical: f64,
+        /// χ of eq. 7.
+        chi: f64,
+        /// ξ of eq. 8.
+        xi: f64,
+    },
+}
+
 /// Continuum parameters (Yue 2018 §3.3–3.4, Chen 2021 §2.2).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MpmMaterial {
+    pub model: MpmModel,
     /// Young's modulus [Pa].
     pub young: f64,
     /// Poisson's ratio, in [0, 0.5).
     pub poisson: f64,
-    /// Friction angle [degrees].
+    /// Friction angle [degrees] (the critical-state one, φ_cs, with `critical_state`).
     pub friction_angle: f64,
-    /// Cohesion [Pa].
+    /// Cohesion [Pa] (`critical_state` only).
     pub cohesion: f64,
-    /// Dilation angle [degrees].
-    pub dilation_angle: f64,
+    /// Initial packing fraction Φ0: the continuum's density is Φ0 × the material density.
+    pub packing: f64,
+}
+
+/// How the MPM discretizes (the `[mpm]` table).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MpmSettings {
+    /// Points per cell along each axis (2 → 4 per cell in 2D, 8 in 3D).
+    pub points_per_axis: u32,
+    /// Shape functions: GIMP (Yue 2018) or quadratic B-splines.
+    pub kernel: MpmKernel,
+    /// Grid-to-point transfer: PIC/FLIP with this FLIP share β, or APIC when `None`.
+    pub flip: Option<f64>,
+    /// Condition on the three outer node layers of the domain faces.
+    pub domain_walls: MpmDomainWalls,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MpmKernel {
+    Gimp,
+    Bspline,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MpmDomainWalls {
+    Slip,
+    Sticky,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -147,6 +190,9 @@ pub struct Body {
     pub packing: Option<PathBuf>,
     /// Grains that never move but push (a rough base of glued grains). DEM bodies only.
     pub frozen: bool,
+    /// Confining pressure on the faces of a box of material points [Pa] (biaxial and triaxial
+    /// tests). MPM box bodies only.
+    pub confining_pressure: f64,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -170,6 +216,8 @@ pub struct Wall {
     pub velocity: [f64; 3],
     /// Scripted angular velocity of a drum about its axis [rad/s], counter-clockwise positive.
     pub spin: f64,
+    /// Material sticks (MPM): no slip at all, whatever the friction.
+    pub sticky: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -250,6 +298,7 @@ pub struct Scene {
     pub bodies: Vec<Body>,
     pub walls: Vec<Wall>,
     pub coupling: Coupling,
+    pub mpm: MpmSettings,
     pub oracle: Option<Oracle>,
     pub output: Output,
     pub synthetic: Option<Synthetic>,
@@ -546,6 +595,78 @@ fn non_negative(ctx: &Ctx, v: &Option<Spanned<f64>>, field: &str) -> Result<f64,
     v.as_ref().map_or(Ok(0.0), |v| in_range(ctx, v, field, Closed(0.0), Bound::None))
 }
 
+fn mpm_settings(ctx: &Ctx, raw: Option<&raw::RawMpm>) -> Result<MpmSettings, SceneError> {
+    let mut out = MpmSettings {
+        points_per_axis: 2,
+        kernel: MpmKernel::Gimp,
+        flip: Some(0.98),
+        domain_walls: MpmDomainWalls::Slip,
+    };
+    let Some(m) = raw else { return Ok(out) };
+    if let Some(n) = &m.points_per_axis {
+        if !(1..=4).contains(n.get_ref()) {
+            return Err(ctx.err(
+                Some(n.span()),
+                Some("mpm.points_per_axis"),
+                format!("must be 1 to 4, got {}", n.get_ref()),
+            ));
+        }
+        out.points_per_axis = *n.get_ref();
+    }
+    if let Some(k) = &m.kernel {
+        out.kernel = match k.get_ref().as_str() {
+            "gimp" => MpmKernel::Gimp,
+            "bspline" => MpmKernel::Bspline,
+            other => {
+                return Err(ctx.err(
+                    Some(k.span()),
+                    Some("mpm.kernel"),
+                    format!("must be \"gimp\" or \"bspline\", got {other:?}"),
+                ));
+            }
+        };
+    }
+    let beta = match &m.flip {
+        Some(b) => in_range(ctx, b, "mpm.flip", Closed(0.0), Closed(1.0))?,
+        None => 0.98,
+    };
+    out.flip = match m.transfer.as_ref().map(|t| (t, t.get_ref().as_str())) {
+        None | Some((_, "flip")) => Some(beta),
+        Some((t, "apic")) => {
+            if let Some(b) = &m.flip {
+                return Err(ctx.err(
+                    Some(b.span()),
+                    Some("mpm.flip"),
+                    "is the FLIP share of transfer = \"flip\"; APIC has none".into(),
+                ));
+            }
+            let _ = t;
+            None
+        }
+        Some((t, other)) => {
+            return Err(ctx.err(
+                Some(t.span()),
+                Some("mpm.transfer"),
+                format!("must be \"flip\" or \"apic\", got {other:?}"),
+            ));
+        }
+    };
+    if let Some(w) = &m.domain_walls {
+        out.domain_walls = match w.get_ref().as_str() {
+            "slip" => MpmDomainWalls::Slip,
+            "sticky" => MpmDomainWalls::Sticky,
+            other => {
+                return Err(ctx.err(
+                    Some(w.span()),
+                    Some("mpm.domain_walls"),
+                    format!("must be \"slip\" or \"sticky\", got {other:?}"),
+                ));
+            }
+        };
+    }
+    Ok(out)
+}
+
 fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneError> {
     if *raw.schema.get_ref() != SCHEMA_VERSION {
         return Err(ctx.err(
@@ -690,15 +811,63 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             None => None,
             Some(c) => {
                 let f = |name: &str| format!("material[{i}].mpm.{name}");
+                let model = match c.model.as_ref().map(|m| m.get_ref().as_str()) {
+                    None | Some("drucker_prager") => {
+                        for (name, v) in [("packing_critical", &c.packing_critical), ("chi", &c.chi), ("xi", &c.xi)] {
+                            if let Some(v) = v {
+                                return Err(ctx.err(
+                                    Some(v.span()),
+                                    Some(&f(name)),
+                                    "belongs to model = \"critical_state\" (Chen 2021), not \"drucker_prager\"".into(),
+                                ));
+                            }
+                        }
+                        if let Some(coh) = &c.cohesion
+                            && *coh.get_ref() != 0.0
+                        {
+                            return Err(ctx.err(
+                                Some(coh.span()),
+                                Some(&f("cohesion")),
+                                "model = \"drucker_prager\" (Yue 2018) is cohesionless; use model = \"critical_state\" for cohesion".into(),
+                            ));
+                        }
+                        MpmModel::DruckerPrager
+                    }
+                    Some("critical_state") => MpmModel::CriticalState {
+                        packing_critical: match &c.packing_critical {
+                            Some(v) => in_range(ctx, v, &f("packing_critical"), Open(0.0), Open(1.0))?,
+                            None => {
+                                return Err(ctx.err(
+                                    c.model.as_ref().map(|m| m.span()),
+                                    Some(&f("packing_critical")),
+                                    "model = \"critical_state\" needs the critical packing fraction `packing_critical` (Chen 2021 Table 2: 0.815)".into(),
+                                ));
+                            }
+                        },
+                        chi: match &c.chi {
+                            Some(v) => in_range(ctx, v, &f("chi"), Closed(0.0), Bound::None)?,
+                            None => 7.0,
+                        },
+                        xi: match &c.xi {
+                            Some(v) => in_range(ctx, v, &f("xi"), Closed(0.0), Bound::None)?,
+                            None => 0.01,
+                        },
+                    },
+                    Some(other) => {
+                        return Err(ctx.err(
+                            c.model.as_ref().map(|m| m.span()),
+                            Some(&f("model")),
+                            format!("must be \"drucker_prager\" (Yue 2018) or \"critical_state\" (Chen 2021), got {other:?}"),
+                        ));
+                    }
+                };
                 Some(MpmMaterial {
+                    model,
                     young: positive(ctx, &c.young, &f("young"))?,
                     poisson: in_range(ctx, &c.poisson, &f("poisson"), Closed(0.0), Open(0.5))?,
                     friction_angle: in_range(ctx, &c.friction_angle, &f("friction_angle"), Closed(0.0), Open(90.0))?,
                     cohesion: non_negative(ctx, &c.cohesion, &f("cohesion"))?,
-                    dilation_angle: match &c.dilation_angle {
-                        Some(a) => in_range(ctx, a, &f("dilation_angle"), Closed(0.0), Open(90.0))?,
-                        None => 0.0,
-                    },
+                    packing: in_range(ctx, &c.packing, &f("packing"), Open(0.0), Closed(1.0))?,
                 })
             }
         };
@@ -790,12 +959,24 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             ));
         }
         let frozen = b.frozen.as_ref().is_some_and(|fz| *fz.get_ref());
+        let confining_pressure = match &b.confining_pressure {
+            None => 0.0,
+            Some(p) if model != Model::Mpm || !matches!(shape, Shape::Box { .. }) => {
+                return Err(ctx.err(
+                    Some(p.span()),
+                    Some(&f("confining_pressure")),
+                    "only a model = \"mpm\" body of shape \"box\" can be confined".into(),
+                ));
+            }
+            Some(p) => in_range(ctx, p, &f("confining_pressure"), Closed(0.0), Bound::None)?,
+        };
         bodies.push(Body {
             material,
             model,
             shape,
             packing,
             frozen,
+            confining_pressure,
         });
     }
 
@@ -861,6 +1042,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 Some(sp) => in_range(ctx, sp, &f("spin"), Bound::None, Bound::None)?,
                 None => 0.0,
             },
+            sticky: w.sticky.unwrap_or(false),
         });
     }
 
@@ -884,6 +1066,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             },
         },
     };
+    let mpm = mpm_settings(ctx, raw.mpm.as_ref())?;
     let oracle = match &raw.oracle {
         None => None,
         Some(o) => Some(Oracle {
@@ -1024,6 +1207,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         bodies,
         walls,
         coupling,
+        mpm,
         oracle,
         output,
         synthetic,
@@ -1108,6 +1292,7 @@ pub mod raw {
         #[serde(default)]
         pub wall: Vec<RawWall>,
         pub coupling: Option<RawCoupling>,
+        pub mpm: Option<RawMpm>,
         pub oracle: Option<RawOracle>,
         pub output: Option<RawOutput>,
         pub synthetic: Option<RawSynthetic>,
@@ -1164,7 +1349,21 @@ pub mod raw {
         pub poisson: Spanned<f64>,
         pub friction_angle: Spanned<f64>,
         pub cohesion: Option<Spanned<f64>>,
-        pub dilation_angle: Option<Spanned<f64>>,
+        pub model: Option<Spanned<String>>,
+        pub packing: Spanned<f64>,
+        pub packing_critical: Option<Spanned<f64>>,
+        pub chi: Option<Spanned<f64>>,
+        pub xi: Option<Spanned<f64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawMpm {
+        pub points_per_axis: Option<Spanned<u32>>,
+        pub kernel: Option<Spanned<String>>,
+        pub transfer: Option<Spanned<String>>,
+        pub flip: Option<Spanned<f64>>,
+        pub domain_walls: Option<Spanned<String>>,
     }
 
     #[derive(Deserialize)]
@@ -1179,6 +1378,7 @@ pub mod raw {
         pub radius: Option<Spanned<f64>>,
         pub packing: Option<Spanned<String>>,
         pub frozen: Option<Spanned<bool>>,
+        pub confining_pressure: Option<Spanned<f64>>,
     }
 
     #[derive(Deserialize)]
@@ -1196,6 +1396,7 @@ pub mod raw {
         pub friction: Option<Spanned<f64>>,
         pub velocity: Option<Spanned<Vec<f64>>>,
         pub spin: Option<Spanned<f64>>,
+        pub sticky: Option<bool>,
     }
 
     #[derive(Deserialize)]

@@ -5,6 +5,7 @@
 //! - [`solver`]: the participant loop of a solver (DEM or MPM) behind the [`solver::Solver`]
 //!   trait, which the physics services implement;
 //! - [`synthetic`]: the synthetic solver of test scenes (issue 2), clearly apart from physics;
+//! - [`vtu`]: VTU frames of point clouds (grains, material points) for ParaView;
 //! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares.
 
 pub mod cli;
@@ -12,6 +13,7 @@ pub mod session;
 pub mod signals;
 pub mod solver;
 pub mod synthetic;
+pub mod vtu;
 
 /// Why a participant stopped without finishing; chooses the exit code.
 #[derive(Debug, thiserror::Error)]

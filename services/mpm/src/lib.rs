@@ -1,15 +1,21 @@
-//! MPM of grains (issue 4, in progress):
+//! MPM of grains: an elastoplastic granular continuum in 2D and 3D, as plain functions over
+//! plain data (no I/O, no transport).
 //!
-//! - [`matrix`]: the few 2×2 / 3×3 operations the models need, on glam `DMat2`/`DMat3`;
-//! - [`constitutive::plasticity_drucker_prager`]: Yue 2018's `b^e` elasticity (eqs. 9–10),
-//!   Drucker–Prager yield (eq. 11), volume-preserving return mapping (eqs. 12–17, Cardano in
-//!   3D) and free flow under extension;
-//! - [`pipeline`]: the explicit step in two phases (Alg. 20/21) over a dense grid with GIMP or
-//!   quadratic B-spline weights from `grains-grid`, PIC/FLIP or APIC.
-//!
-//! Not yet: Chen 2021's Hencky / critical-state model, sparse grid blocks, rayon,
-//! traction boundaries, the stability checks and the service.
+//! - [`points`]: material points (structure of arrays), seeding from boxes and balls, confining
+//!   loads;
+//! - [`sparse`]: the sparse block grid (memory follows the material);
+//! - [`boundary`]: sticky, slip, frictional and moving walls on grid nodes;
+//! - [`pipeline`]: the explicit step in two phases (Yue 2018 Alg. 20/21) with GIMP or quadratic
+//!   B-spline weights from `grains-grid`, PIC/FLIP or APIC, on a rayon pool; NaN and
+//!   out-of-domain checks naming the phase; the CFL limit;
+//! - [`constitutive`]: Yue 2018's `b^e` elasticity with Drucker–Prager and a volume-preserving
+//!   return (eqs. 9–17), Chen 2021's Hencky elasticity with cohesive Drucker–Prager and
+//!   critical-state softening (eqs. 4–8);
+//! - [`matrix`]: the few 2×2 / 3×3 operations the models need, on glam `DMat2`/`DMat3`.
 
+pub mod boundary;
 pub mod constitutive;
 pub mod matrix;
 pub mod pipeline;
+pub mod points;
+pub mod sparse;

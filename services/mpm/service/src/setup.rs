@@ -1,0 +1,174 @@
+//! Scene → material points and step parameters: the only place where the scene file meets the
+//! MPM library.
+
+use grains_grid::{Grid, Kernel, Space};
+use grains_mpm::boundary::{Contact, Geometry, Wall};
+use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
+use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
+use grains_mpm::matrix::MpmSpace;
+use grains_mpm::pipeline::{Model, MpmParams, Transfer, cfl_time_step};
+use grains_mpm::points::{Points, Region, confine, seed};
+use grains_protocol::scene::{Material, MpmDomainWalls, MpmKernel, MpmModel, Scene, Shape, WallShape};
+
+/// The one MPM material of a scene (one per scene in this version) and its index.
+fn mpm_material(scene: &Scene) -> Result<(usize, &Material), String> {
+    let mut used = scene
+        .bodies
+        .iter()
+        .filter(|b| b.model != grains_protocol::scene::Model::Dem)
+        .map(|b| b.material);
+    let Some(first) = used.next() else {
+        return Err("the scene has no mpm or hybrid body".into());
+    };
+    if let Some(other) = used.find(|&m| m != first) {
+        return Err(format!(
+            "mpm bodies use materials `{}` and `{}`; this version runs one MPM material per scene",
+            scene.materials[first].name, scene.materials[other].name
+        ));
+    }
+    Ok((first, &scene.materials[first]))
+}
+
+/// The constitutive model of a material in `dim` dimensions.
+pub fn model(material: &Material, dim: usize) -> Model {
+    let m = material.mpm.as_ref().expect("validated: mpm bodies have [material.mpm]");
+    match m.model {
+        MpmModel::DruckerPrager => Model::Yue(DruckerPragerYue::new(m.young, m.poisson, m.friction_angle, dim)),
+        MpmModel::CriticalState { packing_critical, chi, xi } => {
+            let elastic = DruckerPragerYue::new(m.young, m.poisson, 0.0, dim);
+            Model::CriticalState(HenckyCriticalState {
+                bulk: elastic.bulk,
+                shear: elastic.shear,
+                friction_cs_deg: m.friction_angle,
+                packing_cs: packing_critical,
+                chi,
+                xi,
+                cohesion: m.cohesion,
+            })
+        }
+    }
+}
+
+/// Bulk density of the continuum: packing fraction × grain material density [kg/m³].
+fn bulk_density(material: &Material) -> f64 {
+    material.density * material.mpm.as_ref().map_or(1.0, |m| m.packing)
+}
+
+/// What the MPM needs of a scene before anything runs: one material, plane or box walls, and
+/// the time step under the CFL limit h / c of the elastic wave speed c = √(M / ρ). Errors name
+/// the scene field.
+pub fn check(scene: &Scene) -> Result<(), (String, String)> {
+    let (_, material) = mpm_material(scene).map_err(|e| ("body".to_string(), e))?;
+    for (k, w) in scene.walls.iter().enumerate() {
+        if matches!(w.shape, WallShape::Drum { .. } | WallShape::Segment { .. }) {
+            return Err((
+                format!("wall[{k}].kind"),
+                "MPM walls are \"plane\" or \"box\" in this version (drum and segment walls act on grains only)".into(),
+            ));
+        }
+    }
+    let dim = scene.dim();
+    let h = scene.domain.cell_size;
+    let rho = bulk_density(material);
+    let model = model(material, dim);
+    let limit = cfl_time_step(&model, rho, h, dim);
+    if scene.dt > limit {
+        return Err((
+            "run.dt".into(),
+            format!(
+                "the MPM step run.dt = {:.3e} s is above the CFL limit h / c = {limit:.3e} s (CFL number {:.2} > 1): cell h = {h} m, \
+                 elastic wave speed c = √(M/ρ) = {:.1} m/s with P-wave modulus M = {:.4e} Pa of material `{}` and bulk density ρ = {rho:.1} kg/m³; \
+                 lower run.dt (0.3–0.5 of the limit is usual) or coarsen domain.cell_size",
+                scene.dt,
+                scene.dt / limit,
+                h / limit,
+                model.p_wave_modulus(dim),
+                material.name
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn vec<S: Space>(a: [f64; 3]) -> S::V {
+    S::from_array(a)
+}
+
+/// Points of every mpm body and the step parameters of a scene.
+pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), String> {
+    let dim = scene.dim();
+    let (material_index, material) = mpm_material(scene)?;
+    let h = scene.domain.cell_size;
+    let per_axis = scene.mpm.points_per_axis as usize;
+    let grid = Grid::covering(scene.domain.min, scene.domain.max, h, dim);
+    let spacing = h / per_axis as f64;
+    let volume = spacing.powi(dim as i32);
+    let rho = bulk_density(material);
+    let packing = material.mpm.as_ref().map_or(1.0, |m| m.packing);
+    let mut pts = Points::<S>::default();
+    for body in scene.bodies.iter().filter(|b| b.model == grains_protocol::scene::Model::Mpm) {
+        debug_assert_eq!(body.material, material_index);
+        let region = match body.shape {
+            Shape::Box { min, max } => Region::Box { min, max },
+            Shape::Ball { center, radius } => Region::Ball { center, radius },
+        };
+        let first = pts.len();
+        for x in seed::<S>(region, grid.origin, h, per_axis) {
+            pts.push(x, rho * volume, volume, packing);
+        }
+        if body.confining_pressure > 0.0
+            && let Shape::Box { min, max } = body.shape
+        {
+            let all = first..pts.len();
+            confine(&mut pts, all, min, max, spacing, body.confining_pressure);
+        }
+    }
+    let walls = scene
+        .walls
+        .iter()
+        .filter_map(|w| {
+            let geometry = match w.shape {
+                WallShape::Plane { point, normal } => Geometry::Plane {
+                    point: vec::<S>(point),
+                    normal: vec::<S>(normal),
+                },
+                WallShape::Box { min, max } => Geometry::Box {
+                    min: vec::<S>(min),
+                    max: vec::<S>(max),
+                },
+                WallShape::Drum { .. } | WallShape::Segment { .. } => return None,
+            };
+            let contact = if w.sticky {
+                Contact::Sticky
+            } else if w.friction > 0.0 {
+                Contact::Friction(w.friction)
+            } else {
+                Contact::Slip
+            };
+            Some(Wall {
+                geometry,
+                contact,
+                velocity: vec::<S>(w.velocity),
+            })
+        })
+        .collect();
+    let params = MpmParams {
+        grid,
+        kernel: match scene.mpm.kernel {
+            MpmKernel::Gimp => Kernel::Gimp { half_width: 0.5 * spacing },
+            MpmKernel::Bspline => Kernel::Bspline2,
+        },
+        model: model(material, dim),
+        gravity: vec::<S>(scene.gravity),
+        transfer: match scene.mpm.flip {
+            Some(beta) => Transfer::Flip(beta),
+            None => Transfer::Apic,
+        },
+        domain_walls: Some(match scene.mpm.domain_walls {
+            MpmDomainWalls::Slip => Contact::Slip,
+            MpmDomainWalls::Sticky => Contact::Sticky,
+        }),
+        walls,
+    };
+    Ok((pts, params))
+}
