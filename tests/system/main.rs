@@ -301,6 +301,75 @@ fn a_time_step_above_the_stable_limit_is_refused_before_the_run() {
 }
 
 #[test]
+fn an_mpm_scene_starts_only_the_mpm_writes_point_frames_and_threads_give_the_same_physics() {
+    let _machine = machine();
+    let out = out_dir("mpm");
+    let out_s = out.to_str().unwrap();
+    let scene = "tests/scenes/mpm_small_2d.toml";
+    let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    let parts = summary(&dir)["participants"].clone();
+    let roles: Vec<&str> = parts.as_array().unwrap().iter().map(|p| p["role"].as_str().unwrap()).collect();
+    assert_eq!(roles, ["mpm"], "an MPM-only scene starts no DEM, coupler or oracle");
+    // 10 × 20 cells of 2 × 2 points.
+    let points: u64 = column(&dir, "mpm_items")[0].parse().unwrap();
+    assert_eq!(points, 800);
+    let pvd = std::fs::read_to_string(dir.join("frames/points.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
+    let vtu = std::fs::read_to_string(dir.join("frames/points_00000040.vtu")).unwrap();
+    assert!(vtu.contains(&format!("NumberOfPoints=\"{points}\"")) && vtu.trim_end().ends_with("</VTKFile>"));
+    for name in [
+        "\"velocity\"",
+        "\"pressure\"",
+        "\"plastic_strain\"",
+        "\"plastic_strain_rate\"",
+        "\"packing_fraction\"",
+    ] {
+        assert!(vtu.contains(name), "frame lacks {name}");
+    }
+    // Falling under gravity: the points gain downward momentum from rest.
+    let py: Vec<f64> = column(&dir, "mpm_py").iter().map(|v| v.parse().unwrap()).collect();
+    assert!(py[5] < 0.0 && py[20] < py[5], "{py:?}");
+
+    let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
+    assert!(status.success(), "{err}");
+    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(read(&dir), read(&run_dir(&err)));
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn an_mpm_time_step_above_the_cfl_limit_is_refused_before_the_run() {
+    let out = out_dir("cfl");
+    // E = 1 MPa, ν = 0.3: M = κ + μ = 1.10 MPa; ρ = 0.6 × 2650: c = √(M/ρ) = 26.3 m/s, so
+    // h / c = 3.804e-4 s for h = 1 cm.
+    let (status, err) = run_to_end(&[
+        "run",
+        "tests/scenes/mpm_small_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "run.dt=5e-4",
+    ]);
+    assert_eq!(status.code(), Some(2), "{err}");
+    for needle in [
+        "mpm_small_2d.toml",
+        "run.dt",
+        "5.000e-4 s",
+        "CFL limit h / c = 3.804e-4 s",
+        "26.3 m/s",
+    ] {
+        assert!(err.contains(needle), "expected {needle:?} in: {err}");
+    }
+    assert!(!out.join("mpm_small_2d").exists(), "nothing may run or be written");
+    // The same check in `grains check`.
+    let (status, err) = run_to_end(&["check", "tests/scenes/mpm_small_2d.toml"]);
+    assert!(status.success(), "{err}");
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
 fn a_packing_from_grains_pack_is_reused_by_a_scene() {
     let _machine = machine();
     let out = out_dir("pack");

@@ -221,3 +221,129 @@ fn elastic_bar_vibrates_at_c_over_2l_in_3d() {
         "3D: f = {f} Hz, expected c/(2L) = {expected} Hz"
     );
 }
+
+fn sand_params_2d(grid: Grid, h: f64, model: Model) -> MpmParams<D2> {
+    use grains_mpm::boundary::{Contact, Geometry, Wall};
+    MpmParams {
+        grid,
+        kernel: Kernel::Gimp { half_width: 0.25 * h },
+        model,
+        gravity: DVec2::new(0.0, -9.81),
+        transfer: Transfer::Flip(0.98),
+        domain_walls: Some(Contact::Slip),
+        walls: vec![Wall {
+            geometry: Geometry::Plane {
+                point: DVec2::ZERO,
+                normal: DVec2::Y,
+            },
+            contact: Contact::Friction(0.5),
+            velocity: DVec2::ZERO,
+        }],
+    }
+}
+
+/// Slope of a pile's flank: the highest point in every column of width `w`, fitted by least
+/// squares over the columns whose top lies between 20% and 80% of the pile's height (the
+/// crest and the one-point-thick toe left out).
+fn flank_slope(pts: &Points<D2>, w: f64) -> f64 {
+    let x_max = pts.x.iter().map(|x| x.x).fold(0.0, f64::max);
+    let n = (x_max / w).ceil() as usize + 1;
+    let mut top = vec![f64::NEG_INFINITY; n];
+    for x in &pts.x {
+        let c = ((x.x.max(0.0) / w) as usize).min(n - 1);
+        top[c] = top[c].max(x.y);
+    }
+    let height = top.iter().cloned().fold(0.0, f64::max);
+    let flank: Vec<(f64, f64)> = top
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| **t > 0.2 * height && **t < 0.8 * height)
+        .map(|(c, t)| ((c as f64 + 0.5) * w, *t))
+        .collect();
+    assert!(flank.len() >= 5, "too few flank columns: {flank:?}");
+    let n = flank.len() as f64;
+    let (mx, my) = (
+        flank.iter().map(|p| p.0).sum::<f64>() / n,
+        flank.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxy: f64 = flank.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = flank.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    (sxy / sxx).abs()
+}
+
+/// A block of Drucker–Prager sand (Yue 2018 model, friction angle 30°) released on a rough
+/// floor slumps and comes to rest with a flank no steeper than the friction angle: with
+/// α from the plane Mohr–Coulomb match, a slope steeper than φ cannot carry gravity (the
+/// infinite-slope stability of a cohesionless Coulomb material, tan β ≤ tan φ).
+#[test]
+fn drucker_prager_block_comes_to_rest_no_steeper_than_its_friction_angle() {
+    let (h, density, phi) = (0.01, 1600.0, 30.0);
+    let grid = Grid::covering([-0.03, -0.03, 0.0], [0.8, 0.35, 0.0], h, 2);
+    let mut pts = block([0.0, 0.0], [0.2, 0.2], h, 2, density);
+    let material = DruckerPragerYue::new(1e6, 0.3, phi, 2);
+    let p = sand_params_2d(grid, h, Model::Yue(material));
+    let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
+    let mut pipe = pipeline::<D2>();
+    let steps = (1.5 / dt) as usize;
+    let mass: f64 = pts.mass.iter().sum();
+    for _ in 0..steps {
+        pipe.step(&mut pts, &p, dt).unwrap();
+    }
+    let (ke, _) = point_totals(&pts);
+    // At rest: kinetic energy below 1e-6 of the potential energy released m g H.
+    assert!(ke < 1e-6 * mass * 9.81 * 0.2, "still moving: {ke} J");
+    let runout = pts.x.iter().map(|x| x.x).fold(0.0, f64::max);
+    assert!(runout > 0.25, "the block must have slumped (front at {runout} m)");
+    let slope = flank_slope(&pts, 2.0 * h);
+    let limit = phi.to_radians().tan();
+    eprintln!(
+        "pile flank {:.1}° (friction angle {phi}°), front at {runout:.3} m",
+        slope.atan().to_degrees()
+    );
+    assert!(
+        slope <= limit,
+        "flank slope {slope:.3} (= {:.1}°) above tan φ = {limit:.3}",
+        slope.atan().to_degrees()
+    );
+}
+
+/// Material pulled apart carries no pressure: under extension the Yue model flows freely
+/// (det b^e projected to 1) and the critical-state model returns to its stress-free apex
+/// (cohesionless). A block given a uniform expansion velocity field, no gravity.
+#[test]
+fn extension_leaves_zero_pressure() {
+    use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
+    let (h, density) = (0.05, 1000.0);
+    let grid = Grid::covering([0.0; 3], [2.0, 2.0, 0.0], h, 2);
+    let yue = Model::Yue(DruckerPragerYue::new(1e5, 0.3, 30.0, 2));
+    let elastic = DruckerPragerYue::new(1e5, 0.3, 0.0, 2);
+    let chen = Model::CriticalState(HenckyCriticalState {
+        bulk: elastic.bulk,
+        shear: elastic.shear,
+        friction_cs_deg: 30.0,
+        packing_cs: 0.8,
+        chi: 7.0,
+        xi: 0.01,
+        cohesion: 0.0,
+    });
+    for model in [yue, chen] {
+        let mut pts = block([0.7, 0.7], [1.3, 1.3], h, 2, density);
+        let center = DVec2::new(1.0, 1.0);
+        for k in 0..pts.len() {
+            pts.v[k] = (pts.x[k] - center) * 0.5;
+        }
+        let mut p = params(grid, h, 2, elastic);
+        p.model = model;
+        let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
+        let mut pipe = pipeline::<D2>();
+        for _ in 0..200 {
+            pipe.step(&mut pts, &p, dt).unwrap();
+        }
+        let spread = pts.x.iter().map(|x| (*x - center).length()).fold(0.0, f64::max);
+        assert!(spread > 0.45, "{model:?}: the block must have expanded ({spread})");
+        for k in 0..pts.len() {
+            let pressure = Model::pressure(&pts.tau[k], pts.jacobian[k]);
+            assert!(pressure.abs() < 1e-9 * elastic.bulk, "{model:?}: point {k} pressure {pressure} Pa");
+        }
+    }
+}
