@@ -70,28 +70,99 @@ pub struct Axis {
     pub dw: [f64; 3],
 }
 
+/// ⌊t⌋ as an integer without a libm call (f64::floor is one on baseline x86-64).
+#[inline(always)]
+fn floor_i64(t: f64) -> i64 {
+    let i = t as i64;
+    if (i as f64) > t { i - 1 } else { i }
+}
+
+/// A kernel on a cell width with its reciprocals worked out once: the per-point weights then
+/// need no division (a division costs as much as the rest of an axis's weights).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Weights {
+    kernel: Kernel,
+    h: f64,
+    inv_h: f64,
+    /// GIMP: lp, 1 / (4 h lp), 1 / (2 h lp), 1 / (h lp).
+    lp: f64,
+    c4: f64,
+    c2: f64,
+    c1: f64,
+}
+
+impl Weights {
+    pub fn new(kernel: Kernel, h: f64) -> Self {
+        let lp = match kernel {
+            Kernel::Gimp { half_width } => half_width,
+            Kernel::Bspline2 => 0.0,
+        };
+        let hl = h * lp;
+        let inv = |x: f64| if x > 0.0 { 1.0 / x } else { 0.0 };
+        Weights {
+            kernel,
+            h,
+            inv_h: 1.0 / h,
+            lp,
+            c4: inv(4.0 * hl),
+            c2: inv(2.0 * hl),
+            c1: inv(hl),
+        }
+    }
+
+    /// The first node of the stencil of `x` [m] (measured from the grid origin) on one axis.
+    #[inline(always)]
+    pub fn start(&self, x: f64) -> i64 {
+        floor_i64(x * self.inv_h - 0.5)
+    }
+
+    /// Weights of the three nodes around `x` [m] (measured from the grid origin) on one axis.
+    #[inline(always)]
+    pub fn axis(&self, x: f64) -> Axis {
+        let xh = x * self.inv_h;
+        let start = floor_i64(xh - 0.5);
+        let mut w = [0.0; 3];
+        let mut dw = [0.0; 3];
+        match self.kernel {
+            Kernel::Bspline2 => {
+                let f = xh - start as f64; // in [0.5, 1.5)
+                w = [0.5 * (1.5 - f).powi(2), 0.75 - (f - 1.0).powi(2), 0.5 * (f - 0.5).powi(2)];
+                dw = [(f - 1.5) * self.inv_h, -2.0 * (f - 1.0) * self.inv_h, (f - 0.5) * self.inv_h];
+            }
+            Kernel::Gimp { .. } => {
+                for (a, node) in (start..start + 3).enumerate() {
+                    (w[a], dw[a]) = self.gimp(x - node as f64 * self.h);
+                }
+            }
+        }
+        Axis { start, w, dw }
+    }
+
+    #[inline(always)]
+    fn gimp(&self, r: f64) -> (f64, f64) {
+        let (h, lp) = (self.h, self.lp);
+        if lp == 0.0 {
+            return gimp(r, h, 0.0);
+        }
+        let a = r.abs();
+        let sign = r.signum();
+        if a >= h + lp {
+            (0.0, 0.0)
+        } else if a > h - lp {
+            let t = h + lp - a;
+            (t * t * self.c4, -sign * t * self.c2)
+        } else if a > lp {
+            (1.0 - a * self.inv_h, -sign * self.inv_h)
+        } else {
+            (1.0 - (r * r + lp * lp) * self.c2, -r * self.c1)
+        }
+    }
+}
+
 /// Weights of the three nodes around `x` [m] (measured from the grid origin) on one axis.
 #[inline]
 pub fn axis_weights(kernel: Kernel, x: f64, h: f64) -> Axis {
-    let xh = x / h;
-    let start = (xh - 0.5).floor() as i64;
-    let mut w = [0.0; 3];
-    let mut dw = [0.0; 3];
-    match kernel {
-        Kernel::Bspline2 => {
-            let f = xh - start as f64; // in [0.5, 1.5)
-            w = [0.5 * (1.5 - f).powi(2), 0.75 - (f - 1.0).powi(2), 0.5 * (f - 0.5).powi(2)];
-            dw = [(f - 1.5) / h, -2.0 * (f - 1.0) / h, (f - 0.5) / h];
-        }
-        Kernel::Gimp { half_width: lp } => {
-            for (a, node) in (start..start + 3).enumerate() {
-                let (s, ds) = gimp(x - node as f64 * h, h, lp);
-                w[a] = s;
-                dw[a] = ds;
-            }
-        }
-    }
-    Axis { start, w, dw }
+    Weights::new(kernel, h).axis(x)
 }
 
 /// GIMP weight and its derivative for a point at offset r = x_p − x_i from a node: the

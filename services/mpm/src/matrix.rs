@@ -14,6 +14,7 @@ pub trait Matrix:
     /// Frobenius norm.
     fn norm(&self) -> f64;
     /// Deviatoric part X − tr(X)/d I.
+    #[inline]
     fn dev(&self) -> Self {
         *self - Self::identity() * (self.trace() / Self::DIM as f64)
     }
@@ -27,18 +28,23 @@ pub trait Matrix:
 
 impl Matrix for DMat2 {
     const DIM: usize = 2;
+    #[inline]
     fn identity() -> Self {
         DMat2::IDENTITY
     }
+    #[inline]
     fn det(&self) -> f64 {
         self.determinant()
     }
+    #[inline]
     fn inverse(&self) -> Self {
         DMat2::inverse(self)
     }
+    #[inline]
     fn trace(&self) -> f64 {
         self.x_axis.x + self.y_axis.y
     }
+    #[inline]
     fn norm(&self) -> f64 {
         (self.x_axis.length_squared() + self.y_axis.length_squared()).sqrt()
     }
@@ -46,6 +52,7 @@ impl Matrix for DMat2 {
     /// Q the rotation by θ with (cos 2θ, sin 2θ) = (h, b)/r. cos θ and sin θ come from the
     /// half-angle formulas without trig, taking the larger of the two from its square root
     /// (≥ 1/√2, no cancellation) and the other from sin 2θ.
+    #[inline]
     fn sym_eigen(&self) -> ([f64; 3], Self) {
         let (a, c) = (self.x_axis.x, self.y_axis.y);
         let b = 0.5 * (self.x_axis.y + self.y_axis.x);
@@ -64,6 +71,7 @@ impl Matrix for DMat2 {
         };
         ([m + r, m - r, 0.0], DMat2::from_cols(DVec2::new(cos, sin), DVec2::new(-sin, cos)))
     }
+    #[inline]
     fn from_eigen(v: [f64; 3], q: &Self) -> Self {
         let (a, b) = (q.x_axis, q.y_axis);
         let xx = v[0] * a.x * a.x + v[1] * b.x * b.x;
@@ -75,18 +83,23 @@ impl Matrix for DMat2 {
 
 impl Matrix for DMat3 {
     const DIM: usize = 3;
+    #[inline]
     fn identity() -> Self {
         DMat3::IDENTITY
     }
+    #[inline]
     fn det(&self) -> f64 {
         self.determinant()
     }
+    #[inline]
     fn inverse(&self) -> Self {
         DMat3::inverse(self)
     }
+    #[inline]
     fn trace(&self) -> f64 {
         self.x_axis.x + self.y_axis.y + self.z_axis.z
     }
+    #[inline]
     fn norm(&self) -> f64 {
         (self.x_axis.length_squared() + self.y_axis.length_squared() + self.z_axis.length_squared()).sqrt()
     }
@@ -94,6 +107,7 @@ impl Matrix for DMat3 {
     /// tangent from the stable root of t² + 2θt − 1 = 0 (no trig), until the off-diagonal part
     /// is below 1e-15 of the Frobenius norm. Convergence is quadratic: 3–5 sweeps in practice,
     /// at most 10. Robust for repeated eigenvalues (no eigenvector is formed from a null space).
+    #[inline]
     fn sym_eigen(&self) -> ([f64; 3], Self) {
         let mut d = [self.x_axis.x, self.y_axis.y, self.z_axis.z];
         // o[r] is the entry coupling the two indices other than r.
@@ -137,6 +151,7 @@ impl Matrix for DMat3 {
         }
         (d, DMat3::from_cols(v[0], v[1], v[2]))
     }
+    #[inline]
     fn from_eigen(v: [f64; 3], q: &Self) -> Self {
         let (a, b, c) = (q.x_axis, q.y_axis, q.z_axis);
         let (wa, wb, wc) = (a * v[0], b * v[1], c * v[2]);
@@ -162,15 +177,19 @@ pub trait MpmSpace: grains_grid::Space {
 
 impl MpmSpace for grains_grid::D2 {
     type M = DMat2;
+    #[inline]
     fn outer(a: glam::DVec2, b: glam::DVec2) -> DMat2 {
         DMat2::from_cols(a * b.x, a * b.y)
     }
+    #[inline]
     fn mul_vec(m: &DMat2, v: glam::DVec2) -> glam::DVec2 {
         *m * v
     }
+    #[inline]
     fn mul(a: &DMat2, b: &DMat2) -> DMat2 {
         *a * *b
     }
+    #[inline]
     fn transpose(m: &DMat2) -> DMat2 {
         m.transpose()
     }
@@ -178,15 +197,19 @@ impl MpmSpace for grains_grid::D2 {
 
 impl MpmSpace for grains_grid::D3 {
     type M = DMat3;
+    #[inline]
     fn outer(a: glam::DVec3, b: glam::DVec3) -> DMat3 {
         DMat3::from_cols(a * b.x, a * b.y, a * b.z)
     }
+    #[inline]
     fn mul_vec(m: &DMat3, v: glam::DVec3) -> glam::DVec3 {
         *m * v
     }
+    #[inline]
     fn mul(a: &DMat3, b: &DMat3) -> DMat3 {
         *a * *b
     }
+    #[inline]
     fn transpose(m: &DMat3) -> DMat3 {
         m.transpose()
     }
@@ -210,6 +233,7 @@ mod tests {
 
     /// Checks self = Q diag Qᵀ to 1e-13 relative, QᵀQ = I, an exactly symmetric
     /// reconstruction, and (when given) the eigenvalues against the known ones.
+    #[inline]
     fn check<M: Matrix>(a: &M, known: Option<[f64; 3]>, transpose_mul: impl Fn(&M, &M) -> M) {
         let (values, q) = a.sym_eigen();
         let r = M::from_eigen(values, &q);
@@ -238,14 +262,17 @@ mod tests {
         }
     }
 
+    #[inline]
     fn t2(a: &DMat2, b: &DMat2) -> DMat2 {
         a.transpose() * *b
     }
+    #[inline]
     fn t3(a: &DMat3, b: &DMat3) -> DMat3 {
         a.transpose() * *b
     }
 
     #[test]
+    #[inline]
     fn sym_eigen_2d_reconstructs_with_orthogonal_eigenvectors() {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
         let sym = |a: f64, b: f64, c: f64| DMat2::from_cols(DVec2::new(a, b), DVec2::new(b, c));
@@ -279,6 +306,7 @@ mod tests {
     }
 
     #[test]
+    #[inline]
     fn sym_eigen_3d_reconstructs_with_orthogonal_eigenvectors() {
         let mut rng = Rng(0x2545_f491_4f6c_dd1d);
         let sym = |d: [f64; 3], o: [f64; 3]| {

@@ -19,7 +19,7 @@ use crate::constitutive::plasticity_drucker_prager::{self as yue, DruckerPragerY
 use crate::matrix::{Matrix, MpmSpace};
 use crate::points::Points;
 use crate::sparse::BlockMap;
-use grains_grid::shape::axis_weights;
+use grains_grid::shape::Weights;
 use grains_grid::{Grid, Kernel, Space, Vector};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
@@ -145,23 +145,25 @@ pub struct PhaseTimes {
     pub constitutive: Duration,
 }
 
-/// Node arrays of a scatter.
-#[derive(Clone, Debug, Default)]
-struct Nodes<S: Space> {
-    mass: Vec<f64>,
-    momentum: Vec<S::V>,
-    force: Vec<S::V>,
+/// What P2G accumulates on a node (one record per node: a point's scatter touches one cache
+/// line per node rather than one per array).
+#[derive(Clone, Copy, Debug, Default)]
+struct Acc<S: Space> {
+    mass: f64,
+    momentum: S::V,
+    force: S::V,
 }
 
-impl<S: Space> Nodes<S> {
-    fn reset(&mut self, n: usize) {
-        self.mass.clear();
-        self.mass.resize(n, 0.0);
-        self.momentum.clear();
-        self.momentum.resize(n, S::V::default());
-        self.force.clear();
-        self.force.resize(n, S::V::default());
-    }
+/// A node's velocity after phase 1 and before the force update (FLIP needs both).
+#[derive(Clone, Copy, Debug, Default)]
+struct Vel<S: Space> {
+    v: S::V,
+    old: S::V,
+}
+
+fn reset<T: Default + Clone>(v: &mut Vec<T>, n: usize) {
+    v.clear();
+    v.resize(n, T::default());
 }
 
 /// The pipeline: its thread pool and grid state.
@@ -169,20 +171,24 @@ pub struct MpmPipeline<S: MpmSpace> {
     pool: std::sync::Arc<rayon::ThreadPool>,
     threads: usize,
     pub map: BlockMap,
-    nodes: Nodes<S>,
-    /// Per-thread node arrays beyond the first thread.
-    partial: Vec<Nodes<S>>,
-    /// Grid velocity after phase 1 (possibly overwritten by the coupler).
-    pub velocity: Vec<S::V>,
-    /// Grid velocity before the force update (for FLIP).
-    velocity_old: Vec<S::V>,
+    nodes: Vec<Acc<S>>,
+    /// Per-thread node arrays beyond the first thread, each over the slots from its offset.
+    partial: Vec<(usize, Vec<Acc<S>>)>,
+    /// Grid velocities after phase 1 (possibly overwritten by the coupler) and before forces.
+    velocity: Vec<Vel<S>>,
     /// Simulated time [s] (moves walls).
     pub time: f64,
     pub times: PhaseTimes,
+    steps: u64,
 }
 
 /// Points per task in the per-point passes.
 const POINT_TASK: usize = 4096;
+
+/// Sort the points by grid block every this many steps: neighbours in memory stay neighbours
+/// on the grid (cache reuse in P2G and G2P), and each thread's share of the points covers a
+/// compact range of nodes (its private P2G array stays small).
+const SORT_EVERY: u64 = 25;
 
 /// One point's stencil: per axis the first node and the three weights and derivatives.
 #[derive(Clone, Copy)]
@@ -193,7 +199,7 @@ struct Stencil {
 }
 
 #[inline(always)]
-fn stencil<S: Space>(grid: &Grid, kernel: Kernel, x: S::V) -> Stencil {
+fn stencil<S: Space>(grid: &Grid, weights: &Weights, x: S::V) -> Stencil {
     let a = S::to_array(x);
     let mut s = Stencil {
         start: [0; 3],
@@ -201,12 +207,23 @@ fn stencil<S: Space>(grid: &Grid, kernel: Kernel, x: S::V) -> Stencil {
         dw: [[0.0; 3]; 3],
     };
     for (k, &ak) in a.iter().enumerate().take(S::DIM) {
-        let axis = axis_weights(kernel, ak - grid.origin[k], grid.h);
+        let axis = weights.axis(ak - grid.origin[k]);
         s.start[k] = axis.start;
         s.w[k] = axis.w;
         s.dw[k] = axis.dw;
     }
     s
+}
+
+/// The first node of a point's stencil.
+#[inline(always)]
+fn stencil_start<S: Space>(grid: &Grid, weights: &Weights, x: S::V) -> [i64; 3] {
+    let a = S::to_array(x);
+    let mut start = [0; 3];
+    for (k, &ak) in a.iter().enumerate().take(S::DIM) {
+        start[k] = weights.start(ak - grid.origin[k]);
+    }
+    start
 }
 
 /// Calls `f(slot, weight, gradient, node − x)` for the 3^d nodes of a stencil.
@@ -247,12 +264,12 @@ impl<S: MpmSpace> MpmPipeline<S> {
             pool: std::sync::Arc::new(pool),
             threads,
             map: BlockMap::default(),
-            nodes: Nodes::default(),
+            nodes: Vec::new(),
             partial: Vec::new(),
             velocity: Vec::new(),
-            velocity_old: Vec::new(),
             time: 0.0,
             times: PhaseTimes::default(),
+            steps: 0,
         })
     }
 
@@ -275,14 +292,28 @@ impl<S: MpmSpace> MpmPipeline<S> {
         if self.map.domain_blocks() == 0 || self.map_grid_changed(grid) {
             self.map = BlockMap::new(grid, S::DIM);
         }
-        self.map.rebuild(pts.x.iter().map(|&x| stencil::<S>(grid, params.kernel, x).start));
+        let weights = Weights::new(params.kernel, grid.h);
+        self.map.rebuild(pts.x.iter().map(|&x| stencil_start::<S>(grid, &weights, x)));
         let n = self.map.len();
         let chunks = if pts.len() >= 2 * POINT_TASK { self.threads } else { 1 };
-        self.partial.resize_with(chunks - 1, Nodes::default);
+        self.partial.resize_with(chunks - 1, || (0, Vec::new()));
         let per = pts.len().div_ceil(chunks);
         let map = &self.map;
-        let scatter_range = |nodes: &mut Nodes<S>, range: std::ops::Range<usize>| {
-            nodes.reset(n);
+        let bn = map.block_nodes();
+        // The slots a range of points writes: from the block of the lowest stencil start to the
+        // end of the block of the highest stencil end (slots follow block order).
+        let slot_range = |range: std::ops::Range<usize>| {
+            let (mut lo, mut hi) = (usize::MAX, 0);
+            for p in range {
+                let s = stencil_start::<S>(grid, &weights, pts.x[p]);
+                lo = lo.min(map.slot(s));
+                let end = [0, 1, 2].map(|k| if k < S::DIM { s[k] + 2 } else { 0 });
+                hi = hi.max(map.slot(end));
+            }
+            (lo / bn * bn, (hi / bn + 1) * bn)
+        };
+        let scatter_range = |nodes: &mut Vec<Acc<S>>, offset: usize, len: usize, range: std::ops::Range<usize>| {
+            reset(nodes, len);
             for p in range {
                 let (w, xp) = (pts.weight[p], pts.x[p]);
                 let m = pts.mass[p] * w;
@@ -290,49 +321,45 @@ impl<S: MpmSpace> MpmPipeline<S> {
                 let tau = pts.tau[p] * (pts.volume[p] * w);
                 let (v, c) = (pts.v[p], pts.affine[p]);
                 let apic = params.transfer == Transfer::Apic;
-                let st = stencil::<S>(grid, params.kernel, xp);
+                let st = stencil::<S>(grid, &weights, xp);
                 for_stencil::<S>(grid, map, &st, xp, |i, wip, grad, r| {
-                    nodes.mass[i] += m * wip;
+                    let node = &mut nodes[i - offset];
+                    node.mass += m * wip;
                     let vi = if apic { v + S::mul_vec(&c, r) } else { v };
-                    nodes.momentum[i] += vi * (m * wip);
-                    nodes.force[i] -= S::mul_vec(&tau, grad);
+                    node.momentum += vi * (m * wip);
+                    node.force -= S::mul_vec(&tau, grad);
                 });
             }
         };
         let (first, rest) = (&mut self.nodes, &mut self.partial);
         rayon::join(
-            || scatter_range(first, 0..per.min(pts.len())),
+            || scatter_range(first, 0, n, 0..per.min(pts.len())),
             || {
-                rest.par_iter_mut().enumerate().for_each(|(k, nodes)| {
-                    let lo = ((k + 1) * per).min(pts.len());
-                    scatter_range(nodes, lo..((k + 2) * per).min(pts.len()))
+                rest.par_iter_mut().enumerate().for_each(|(k, (offset, nodes))| {
+                    let range = ((k + 1) * per).min(pts.len())..((k + 2) * per).min(pts.len());
+                    let (lo, hi) = if range.is_empty() { (0, 0) } else { slot_range(range.clone()) };
+                    *offset = lo;
+                    scatter_range(nodes, lo, hi - lo, range)
                 })
             },
         );
-        if !self.partial.is_empty() {
-            let partial = &self.partial;
-            let dst = &mut self.nodes;
-            dst.mass
+        for (offset, src) in &self.partial {
+            self.nodes[*offset..*offset + src.len()]
                 .par_chunks_mut(POINT_TASK)
-                .zip(dst.momentum.par_chunks_mut(POINT_TASK))
-                .zip(dst.force.par_chunks_mut(POINT_TASK))
-                .enumerate()
-                .for_each(|(c, ((m, p), f))| {
-                    let lo = c * POINT_TASK;
-                    for src in partial {
-                        for k in 0..m.len() {
-                            m[k] += src.mass[lo + k];
-                            p[k] += src.momentum[lo + k];
-                            f[k] += src.force[lo + k];
-                        }
+                .zip(src.par_chunks(POINT_TASK))
+                .for_each(|(dst, src)| {
+                    for (d, s) in dst.iter_mut().zip(src) {
+                        d.mass += s.mass;
+                        d.momentum += s.momentum;
+                        d.force += s.force;
                     }
                 });
         }
         // Point loads (few points): serial.
         for &(p, f) in &pts.loads {
-            let st = stencil::<S>(grid, params.kernel, pts.x[p]);
-            let force = &mut self.nodes.force;
-            for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| force[i] += f * wip);
+            let st = stencil::<S>(grid, &weights, pts.x[p]);
+            let nodes = &mut self.nodes;
+            for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
         }
     }
 
@@ -342,34 +369,30 @@ impl<S: MpmSpace> MpmPipeline<S> {
     }
 
     fn update_grid(&mut self, params: &MpmParams<S>, dt: f64) -> Result<(), StepError> {
-        let n = self.map.len();
-        self.velocity.clear();
-        self.velocity.resize(n, S::V::default());
-        self.velocity_old.clear();
-        self.velocity_old.resize(n, S::V::default());
+        reset(&mut self.velocity, self.map.len());
         let (map, nodes, time) = (&self.map, &self.nodes, self.time);
         let bad = self
             .velocity
             .par_chunks_mut(POINT_TASK)
-            .zip(self.velocity_old.par_chunks_mut(POINT_TASK))
             .enumerate()
-            .map(|(c, (vel, old))| {
+            .map(|(c, vel)| {
                 let mut bad = None;
-                for k in 0..vel.len() {
+                for (k, out) in vel.iter_mut().enumerate() {
                     let i = c * POINT_TASK + k;
-                    let m = nodes.mass[i];
-                    if m <= 0.0 {
+                    let node = &nodes[i];
+                    if node.mass <= 0.0 {
                         continue;
                     }
-                    old[k] = nodes.momentum[i] * (1.0 / m);
-                    let mut v = (nodes.momentum[i] + nodes.force[i] * dt) * (1.0 / m) + params.gravity * dt;
+                    let inv_m = 1.0 / node.mass;
+                    out.old = node.momentum * inv_m;
+                    let mut v = (node.momentum + node.force * dt) * inv_m + params.gravity * dt;
                     if params.domain_walls.is_some() || !params.walls.is_empty() {
                         v = apply_walls(params, map.ijk(i), v, time);
                     }
                     if !v.is_finite() && bad.is_none() {
                         bad = Some(map.ijk(i));
                     }
-                    vel[k] = v;
+                    out.v = v;
                 }
                 bad
             })
@@ -397,13 +420,20 @@ impl<S: MpmSpace> MpmPipeline<S> {
             let r = constitutive(pts, &params.model, dt);
             self.times.constitutive += t1.elapsed();
             self.time += dt;
+            self.steps += 1;
+            if self.steps.is_multiple_of(SORT_EVERY) {
+                let t2 = Instant::now();
+                self.sort(pts, params);
+                self.times.g2p += t2.elapsed();
+            }
             r
         })
     }
 
     fn gather(&self, pts: &mut Points<S>, params: &MpmParams<S>, dt: f64) -> Result<(), StepError> {
         let grid = &params.grid;
-        let (map, vel, old) = (&self.map, &self.velocity, &self.velocity_old);
+        let (map, vel) = (&self.map, &self.velocity);
+        let weights = Weights::new(params.kernel, grid.h);
         // Points must keep one cell between them and the outer nodes (see DOMAIN_WALL_NODES).
         let lo = S::from_array([0, 1, 2].map(|k| grid.origin[k] + grid.h));
         let hi = S::from_array([0, 1, 2].map(|k| grid.origin[k] + grid.h * (grid.nodes[k] as f64 - 2.0)));
@@ -431,16 +461,17 @@ impl<S: MpmSpace> MpmPipeline<S> {
                             position: S::to_array(xp),
                         });
                     }
-                    let st = stencil::<S>(grid, params.kernel, xp);
+                    let st = stencil::<S>(grid, &weights, xp);
                     let (mut v_pic, mut dv) = (S::V::default(), S::V::default());
                     let (mut grad_v, mut b, mut d) = (zero, zero, zero);
                     for_stencil::<S>(grid, map, &st, xp, |i, wip, grad, r| {
-                        v_pic += vel[i] * wip;
-                        grad_v = grad_v + S::outer(vel[i], grad);
+                        let node = &vel[i];
+                        v_pic += node.v * wip;
+                        grad_v = grad_v + S::outer(node.v, grad);
                         match params.transfer {
-                            Transfer::Flip(_) => dv += (vel[i] - old[i]) * wip,
+                            Transfer::Flip(_) => dv += (node.v - node.old) * wip,
                             Transfer::Apic => {
-                                b = b + S::outer(vel[i], r) * wip;
+                                b = b + S::outer(node.v, r) * wip;
                                 if gimp_d {
                                     d = d + S::outer(r, r) * wip;
                                 }
@@ -473,6 +504,29 @@ impl<S: MpmSpace> MpmPipeline<S> {
         bad.map_or(Ok(()), Err)
     }
 
+    /// Sorts the points by the grid block of their stencil (a stable counting sort).
+    fn sort(&self, pts: &mut Points<S>, params: &MpmParams<S>) {
+        let weights = Weights::new(params.kernel, params.grid.h);
+        let keys: Vec<u32> = pts
+            .x
+            .iter()
+            .map(|&x| self.map.block_index(stencil_start::<S>(&params.grid, &weights, x)) as u32)
+            .collect();
+        let mut count = vec![0u32; self.map.domain_blocks() + 1];
+        for &k in &keys {
+            count[k as usize + 1] += 1;
+        }
+        for b in 1..count.len() {
+            count[b] += count[b - 1];
+        }
+        let mut order = vec![0u32; keys.len()];
+        for (p, &k) in keys.iter().enumerate() {
+            order[count[k as usize] as usize] = p as u32;
+            count[k as usize] += 1;
+        }
+        pts.permute(&order);
+    }
+
     /// Both phases (an MPM-only step).
     pub fn step(&mut self, pts: &mut Points<S>, params: &MpmParams<S>, dt: f64) -> Result<(), StepError> {
         self.phase1(pts, params, dt)?;
@@ -482,18 +536,18 @@ impl<S: MpmSpace> MpmPipeline<S> {
     /// Total mass and momentum on the grid after phase 1's P2G [kg, kg m/s].
     pub fn grid_totals(&self) -> (f64, S::V) {
         (
-            self.nodes.mass.iter().sum(),
-            self.nodes.momentum.iter().fold(S::V::default(), |a, &b| a + b),
+            self.nodes.iter().map(|n| n.mass).sum(),
+            self.nodes.iter().fold(S::V::default(), |a, n| a + n.momentum),
         )
     }
 
     /// Visits every stored node with mass after phase 1: its (i, j, k), mass and velocity
     /// (which the coupler may change before phase 2).
     pub fn for_each_node_mut(&mut self, mut f: impl FnMut([i64; 3], f64, &mut S::V)) {
-        for (i, v) in self.velocity.iter_mut().enumerate() {
-            let m = self.nodes.mass[i];
+        for (i, node) in self.velocity.iter_mut().enumerate() {
+            let m = self.nodes[i].mass;
             if m > 0.0 {
-                f(self.map.ijk(i), m, v);
+                f(self.map.ijk(i), m, &mut node.v);
             }
         }
     }

@@ -7,6 +7,8 @@ use grains_grid::{Space, Vector};
 /// constitutive update (end of phase 2) writes both, the force computation (phase 1) reads τ.
 #[derive(Clone, Debug)]
 pub struct Points<S: MpmSpace> {
+    /// Identity of a point (the pipeline reorders points by grid block from time to time).
+    pub id: Vec<u64>,
     pub x: Vec<S::V>,
     pub v: Vec<S::V>,
     /// Mass [kg] (2D: per metre).
@@ -37,6 +39,7 @@ pub struct Points<S: MpmSpace> {
 impl<S: MpmSpace> Default for Points<S> {
     fn default() -> Self {
         Points {
+            id: Vec::new(),
             x: Vec::new(),
             v: Vec::new(),
             mass: Vec::new(),
@@ -55,9 +58,10 @@ impl<S: MpmSpace> Default for Points<S> {
 }
 
 impl<S: MpmSpace> Points<S> {
-    /// A point at rest and unstrained.
+    /// A point at rest and unstrained, with the next id.
     pub fn push(&mut self, x: S::V, mass: f64, volume: f64, packing: f64) {
         let zero = S::M::identity() * 0.0;
+        self.id.push(self.id.last().map_or(0, |&i| i + 1));
         self.x.push(x);
         self.v.push(S::V::default());
         self.mass.push(mass);
@@ -74,6 +78,37 @@ impl<S: MpmSpace> Points<S> {
 
     pub fn len(&self) -> usize {
         self.x.len()
+    }
+
+    /// Reorders the points: point k becomes the old point `order[k]` (loads follow).
+    pub fn permute(&mut self, order: &[u32]) {
+        fn apply<T: Copy>(v: &mut Vec<T>, order: &[u32]) {
+            let old = std::mem::take(v);
+            v.extend(order.iter().map(|&k| old[k as usize]));
+        }
+        debug_assert_eq!(order.len(), self.len());
+        apply(&mut self.id, order);
+        apply(&mut self.x, order);
+        apply(&mut self.v, order);
+        apply(&mut self.mass, order);
+        apply(&mut self.volume, order);
+        apply(&mut self.b_e, order);
+        apply(&mut self.tau, order);
+        apply(&mut self.weight, order);
+        apply(&mut self.affine, order);
+        apply(&mut self.jacobian, order);
+        apply(&mut self.packing, order);
+        apply(&mut self.plastic_strain, order);
+        apply(&mut self.plastic_rate, order);
+        if !self.loads.is_empty() {
+            let mut new_index = vec![0usize; order.len()];
+            for (k, &old) in order.iter().enumerate() {
+                new_index[old as usize] = k;
+            }
+            for load in &mut self.loads {
+                load.0 = new_index[load.0];
+            }
+        }
     }
 
     pub fn is_empty(&self) -> bool {

@@ -89,10 +89,16 @@ impl BlockMap {
         }
     }
 
+    /// Index of the block holding node (i, j, k) (blocks numbered x fastest, as slots are).
+    #[inline(always)]
+    pub fn block_index(&self, ijk: [i64; 3]) -> usize {
+        (ijk[0] >> SHIFT) as usize + self.blocks[0] * ((ijk[1] >> SHIFT) as usize + self.blocks[1] * (ijk[2] >> SHIFT) as usize)
+    }
+
     /// Storage index of node (i, j, k); the node's block must be active.
     #[inline(always)]
     pub fn slot(&self, ijk: [i64; 3]) -> usize {
-        let blk = (ijk[0] >> SHIFT) as usize + self.blocks[0] * ((ijk[1] >> SHIFT) as usize + self.blocks[1] * (ijk[2] >> SHIFT) as usize);
+        let blk = self.block_index(ijk);
         let local = (ijk[0] & (BLOCK - 1)) + BLOCK * ((ijk[1] & (BLOCK - 1)) + BLOCK * (ijk[2] & (BLOCK - 1)));
         let page = self.page[blk];
         debug_assert!(page != INACTIVE, "node {ijk:?} of an inactive block");

@@ -39,7 +39,7 @@ pub fn model(material: &Material, dim: usize) -> Model {
             Model::CriticalState(HenckyCriticalState {
                 bulk: elastic.bulk,
                 shear: elastic.shear,
-                friction_cs_deg: m.friction_angle,
+                tan_friction_cs: m.friction_angle.to_radians().tan(),
                 packing_cs: packing_critical,
                 chi,
                 xi,

@@ -1,5 +1,5 @@
 //! The MPM behind the participant loop's [`Solver`] trait, and its VTU frames of the points
-//! (`frames/points.pvd`: velocity, pressure, plastic strain and its rate, packing fraction).
+//! (`frames/points.pvd`: id, velocity, pressure, plastic strain and its rate, packing fraction).
 
 use anyhow::bail;
 use grains_grid::Vector;
@@ -48,6 +48,11 @@ impl<S: MpmSpace> MpmSolver<S> {
         let pressure: Vec<f64> = (0..p.len()).map(|k| Model::pressure(&p.tau[k], p.jacobian[k])).collect();
         let packing: Vec<f64> = (0..p.len()).map(|k| model.packing(p.packing[k], p.jacobian[k])).collect();
         let fields = [
+            Field {
+                name: "id",
+                components: 1,
+                values: Values::U64(&p.id),
+            },
             Field {
                 name: "velocity",
                 components: 3,

@@ -43,8 +43,9 @@ pub struct HenckyCriticalState {
     pub bulk: f64,
     /// Shear modulus G [Pa].
     pub shear: f64,
-    /// Critical-state friction angle φ_cs [degrees].
-    pub friction_cs_deg: f64,
+    /// tan φ_cs of the critical-state friction angle (eq. 7 is written in tangents; kept as one
+    /// so the per-point update needs no trigonometry).
+    pub tan_friction_cs: f64,
     /// Critical packing fraction Φ_cs.
     pub packing_cs: f64,
     /// Dilatancy slope χ: tan ψ = χ (Φ − Φ_cs).
@@ -66,6 +67,7 @@ pub struct Cone {
 impl Cone {
     /// The largest mean stress p the yield surface admits: the apex ζ c / η; for η = 0 (the
     /// cylinder of a frictionless loose state) 0 without cohesion, unbounded with.
+    #[inline]
     pub fn apex(&self, cohesion: f64) -> f64 {
         if self.eta > 0.0 {
             self.zeta * cohesion / self.eta
@@ -85,7 +87,7 @@ impl HenckyCriticalState {
         HenckyCriticalState {
             bulk: 630e6,
             shear: 460e6,
-            friction_cs_deg: 0.27f64.to_degrees(),
+            tan_friction_cs: 0.27f64.tan(),
             packing_cs: 0.815,
             chi: 7.0,
             xi: 0.01,
@@ -94,9 +96,10 @@ impl HenckyCriticalState {
     }
 
     /// (tan φ, tan ψ) of eq. 7, tan φ clamped to ≥ 0.
+    #[inline]
     fn tangents(&self, packing: f64) -> (f64, f64) {
         let tan_psi = self.chi * (packing - self.packing_cs);
-        ((self.friction_cs_deg.to_radians().tan() + tan_psi).max(0.0), tan_psi)
+        ((self.tan_friction_cs + tan_psi).max(0.0), tan_psi)
     }
 
     /// Friction and dilation angles (φ, ψ) [radians] at a packing fraction (eq. 7).
@@ -106,6 +109,7 @@ impl HenckyCriticalState {
     }
 
     /// The yield and flow cone at a packing fraction in `dim` dimensions (see the module docs).
+    #[inline]
     pub fn cone(&self, packing: f64, dim: usize) -> Cone {
         let (tan_phi, tan_psi) = self.tangents(packing);
         // sin and cos from the tangent: no trig on the per-point path.
@@ -168,6 +172,7 @@ fn principal_log_strain<M: Matrix>(b: &M) -> ([f64; 3], M) {
 }
 
 /// Principal Kirchhoff stresses of principal Hencky strains (eq. 4).
+#[inline]
 fn principal_stress(m: &HenckyCriticalState, e: &[f64; 3], dim: usize) -> [f64; 3] {
     let tr: f64 = e[..dim].iter().sum();
     let mut tau = [0.0; 3];
@@ -193,6 +198,7 @@ pub fn yield_function<M: Matrix>(m: &HenckyCriticalState, tau: &M, packing: f64)
 /// plastic strain, eq. 8 is the logistic equation dΦ/ds = ξ Φ (Φ_cs − Φ), solved exactly:
 /// Φ(s) = Φ_cs Φ₀ / (Φ₀ + (Φ_cs − Φ₀) e^(−ξ Φ_cs s)). Exact for any step size, and never
 /// overshoots Φ_cs.
+#[inline]
 pub fn evolve_packing(m: &HenckyCriticalState, packing: f64, plastic_strain_increment: f64) -> f64 {
     let decay = (-m.xi * m.packing_cs * plastic_strain_increment).exp();
     m.packing_cs * packing / (packing + (m.packing_cs - packing) * decay)
@@ -333,7 +339,7 @@ mod tests {
     #[test]
     fn critical_state_angles_follow_eq_7() {
         let m = table2();
-        let phi_cs = m.friction_cs_deg.to_radians();
+        let phi_cs = m.tan_friction_cs.atan();
         assert!((phi_cs - 0.27).abs() < 1e-15);
         let (phi, psi) = m.angles(m.packing_cs);
         assert!((phi - phi_cs).abs() < 1e-15 && psi == 0.0, "at Φ_cs: φ {phi} ψ {psi}");

@@ -97,6 +97,7 @@ pub fn return_map<M: Matrix>(m: &DruckerPragerYue, b_star: &M) -> M {
 /// The largest real root of the depressed cubic x³ + p x + q = 0 (Cardano; trigonometric
 /// form when there are three real roots), polished by one Newton step against the
 /// cancellation of the closed form.
+#[inline]
 pub fn cardano_largest_root(p: f64, q: f64) -> f64 {
     let disc = (q / 2.0).powi(2) + (p / 3.0).powi(3);
     let x = if disc >= 0.0 {
