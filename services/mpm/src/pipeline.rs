@@ -114,7 +114,7 @@ impl std::fmt::Display for Phase {
 pub enum StepError {
     /// A value became NaN or infinite.
     NotFinite { phase: Phase, what: String },
-    /// A point reached the outer cell of the grid (its stencil would leave the grid).
+    /// A point is in the outer cell of the grid (its stencil would leave the grid).
     LeftDomain { point: usize, position: [f64; 3] },
 }
 
@@ -278,7 +278,7 @@ impl<S: MpmSpace> MpmPipeline<S> {
         let pool = self.pool.clone();
         pool.install(|| {
             let t0 = Instant::now();
-            self.scatter(pts, params);
+            self.scatter(pts, params)?;
             let t1 = Instant::now();
             let r = self.update_grid(params, dt);
             self.times.p2g += t1 - t0;
@@ -287,13 +287,18 @@ impl<S: MpmSpace> MpmPipeline<S> {
         })
     }
 
-    fn scatter(&mut self, pts: &Points<S>, params: &MpmParams<S>) {
+    fn scatter(&mut self, pts: &Points<S>, params: &MpmParams<S>) -> Result<(), StepError> {
         let grid = &params.grid;
         if self.map.domain_blocks() == 0 || self.map_grid_changed(grid) {
             self.map = BlockMap::new(grid, S::DIM);
         }
         let weights = Weights::new(params.kernel, grid.h);
-        self.map.rebuild(pts.x.iter().map(|&x| stencil_start::<S>(grid, &weights, x)));
+        if let Err(p) = self.map.rebuild(pts.x.iter().map(|&x| stencil_start::<S>(grid, &weights, x))) {
+            return Err(StepError::LeftDomain {
+                point: p,
+                position: S::to_array(pts.x[p]),
+            });
+        }
         let n = self.map.len();
         let chunks = if pts.len() >= 2 * POINT_TASK { self.threads } else { 1 };
         self.partial.resize_with(chunks - 1, || (0, Vec::new()));
@@ -312,6 +317,7 @@ impl<S: MpmSpace> MpmPipeline<S> {
             }
             (lo / bn * bn, (hi / bn + 1) * bn)
         };
+        let zero = S::M::identity() * 0.0;
         let scatter_range = |nodes: &mut Vec<Acc<S>>, offset: usize, len: usize, range: std::ops::Range<usize>| {
             reset(nodes, len);
             for p in range {
@@ -319,8 +325,9 @@ impl<S: MpmSpace> MpmPipeline<S> {
                 let m = pts.mass[p] * w;
                 // Kirchhoff stress with the reference volume: f_i = −Σ V0 τ ∇w_ip.
                 let tau = pts.tau[p] * (pts.volume[p] * w);
-                let (v, c) = (pts.v[p], pts.affine[p]);
                 let apic = params.transfer == Transfer::Apic;
+                // FLIP never reads the affine matrices (a third of a 3D point's bytes).
+                let (v, c) = (pts.v[p], if apic { pts.affine[p] } else { zero });
                 let st = stencil::<S>(grid, &weights, xp);
                 for_stencil::<S>(grid, map, &st, xp, |i, wip, grad, r| {
                     let node = &mut nodes[i - offset];
@@ -361,6 +368,7 @@ impl<S: MpmSpace> MpmPipeline<S> {
             let nodes = &mut self.nodes;
             for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
         }
+        Ok(())
     }
 
     fn map_grid_changed(&self, grid: &Grid) -> bool {

@@ -16,6 +16,8 @@ const INACTIVE: u32 = u32::MAX;
 pub struct BlockMap {
     /// Blocks per axis (1 on unused axes).
     blocks: [usize; 3],
+    /// Nodes per axis of the grid.
+    nodes: [i64; 3],
     dim: usize,
     /// Block → slot (INACTIVE when not stored).
     page: Vec<u32>,
@@ -31,6 +33,7 @@ impl BlockMap {
         }
         BlockMap {
             blocks,
+            nodes: grid.nodes.map(|n| n as i64),
             dim,
             page: vec![INACTIVE; blocks.iter().product()],
             active: Vec::new(),
@@ -38,9 +41,9 @@ impl BlockMap {
     }
 
     /// Nodes per block (B^d).
-    #[inline]
+    #[inline(always)]
     pub fn block_nodes(&self) -> usize {
-        (BLOCK as usize).pow(self.dim as u32)
+        1 << (SHIFT as usize * self.dim)
     }
 
     /// Stored node count.
@@ -63,13 +66,25 @@ impl BlockMap {
     }
 
     /// Rebuilds the active set: `stencil_starts` yields the first node (i, j, k) of every point's
-    /// 3-node stencil; the blocks of all 3^d nodes become active.
-    pub fn rebuild(&mut self, stencil_starts: impl Iterator<Item = [i64; 3]>) {
+    /// 3-node stencil; the blocks of all 3^d nodes become active. Fails with the position in the
+    /// sequence of the first stencil that does not lie inside the grid.
+    pub fn rebuild(&mut self, stencil_starts: impl Iterator<Item = [i64; 3]>) -> Result<(), usize> {
         self.page.fill(INACTIVE);
         self.active.clear();
         let reach = |s: i64| [s >> SHIFT, (s + 2) >> SHIFT];
-        for start in stencil_starts {
+        // Points come sorted by block: most stencils start in the same block as the last one.
+        let mut last = [i64::MIN; 3];
+        for (p, start) in stencil_starts.enumerate() {
+            if (0..self.dim).any(|k| start[k] < 0 || start[k] + 2 >= self.nodes[k]) {
+                self.page.fill(INACTIVE);
+                return Err(p);
+            }
             let (bx, by, bz) = (reach(start[0]), reach(start[1]), reach(start[2]));
+            let key = [bx[0] + (bx[1] << 32), by[0] + (by[1] << 32), bz[0] + (bz[1] << 32)];
+            if key == last {
+                continue;
+            }
+            last = key;
             let nz = if self.dim == 3 { 2 } else { 1 };
             for c in &bz[..nz] {
                 for b in &by {
@@ -87,6 +102,7 @@ impl BlockMap {
                 self.active.push(blk as u32);
             }
         }
+        Ok(())
     }
 
     /// Index of the block holding node (i, j, k) (blocks numbered x fastest, as slots are).
@@ -102,7 +118,7 @@ impl BlockMap {
         let local = (ijk[0] & (BLOCK - 1)) + BLOCK * ((ijk[1] & (BLOCK - 1)) + BLOCK * (ijk[2] & (BLOCK - 1)));
         let page = self.page[blk];
         debug_assert!(page != INACTIVE, "node {ijk:?} of an inactive block");
-        page as usize * self.block_nodes() + local as usize
+        ((page as usize) << (SHIFT as usize * self.dim)) + local as usize
     }
 
     /// Node (i, j, k) of a storage index (which may lie beyond the grid in a boundary block).
@@ -129,7 +145,10 @@ mod tests {
     fn slots_round_trip_and_only_touched_blocks_are_stored() {
         let grid = Grid::covering([0.0; 3], [10.0, 10.0, 10.0], 0.25, 3);
         let mut map = BlockMap::new(&grid, 3);
-        map.rebuild([[5i64, 6, 7], [30, 30, 30]].into_iter());
+        map.rebuild([[5i64, 6, 7], [30, 30, 30]].into_iter()).unwrap();
+        // 41 nodes per axis: a stencil must start at 0..=38.
+        assert_eq!(map.clone().rebuild([[1, 1, 1], [38, 0, 39]].into_iter()), Err(1));
+        assert_eq!(map.clone().rebuild([[-1, 1, 1]].into_iter()), Err(0));
         // Stencil x 5..7, y 6..8, z 7..9 spans blocks 1 × {1, 2} × {1, 2}; 30..32 spans blocks
         // 7..8 on every axis.
         assert_eq!(map.active_blocks(), 4 + 8);

@@ -6,7 +6,7 @@ use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
 use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
 use grains_mpm::matrix::MpmSpace;
-use grains_mpm::pipeline::{Model, MpmParams, Transfer, cfl_time_step};
+use grains_mpm::pipeline::{DOMAIN_WALL_NODES, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
 use grains_protocol::scene::{Material, MpmDomainWalls, MpmKernel, MpmModel, Scene, Shape, WallShape};
 
@@ -69,6 +69,31 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     }
     let dim = scene.dim();
     let h = scene.domain.cell_size;
+    // The outer three node layers of every domain face are its wall (DOMAIN_WALL_NODES).
+    let margin = (DOMAIN_WALL_NODES - 1) as f64 * h;
+    for (k, b) in scene
+        .bodies
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| b.model == grains_protocol::scene::Model::Mpm)
+    {
+        let (lo, hi) = match b.shape {
+            Shape::Box { min, max } => (min, max),
+            Shape::Ball { center, radius } => (center.map(|c| c - radius), center.map(|c| c + radius)),
+        };
+        for a in 0..dim {
+            if lo[a] < scene.domain.min[a] + margin || hi[a] > scene.domain.max[a] - margin {
+                return Err((
+                    format!("body[{k}]"),
+                    format!(
+                        "MPM material must lie {margin} m (two cells) inside the domain on every side, where the domain's own wall \
+                         layers begin: axis {a} of the body spans [{}, {}], the domain [{}, {}]; widen domain.min/max",
+                        lo[a], hi[a], scene.domain.min[a], scene.domain.max[a]
+                    ),
+                ));
+            }
+        }
+    }
     let rho = bulk_density(material);
     let model = model(material, dim);
     let limit = cfl_time_step(&model, rho, h, dim);
