@@ -549,6 +549,13 @@ impl<S: MpmSpace> MpmPipeline<S> {
         )
     }
 
+    /// The velocity of node (i, j, k) after phase 1, for the coupler to overwrite; `None` when
+    /// the node carries no material.
+    pub fn node_velocity_mut(&mut self, ijk: [i64; 3]) -> Option<&mut S::V> {
+        let slot = self.map.try_slot(ijk)?;
+        (self.nodes[slot].mass > 0.0).then(|| &mut self.velocity[slot].v)
+    }
+
     /// Visits every stored node with mass after phase 1: its (i, j, k), mass and velocity
     /// (which the coupler may change before phase 2).
     pub fn for_each_node_mut(&mut self, mut f: impl FnMut([i64; 3], f64, &mut S::V)) {

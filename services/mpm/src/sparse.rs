@@ -121,6 +121,15 @@ impl BlockMap {
         ((page as usize) << (SHIFT as usize * self.dim)) + local as usize
     }
 
+    /// Storage index of node (i, j, k), or `None` when it is outside the grid or its block is
+    /// not stored.
+    pub fn try_slot(&self, ijk: [i64; 3]) -> Option<usize> {
+        if (0..self.dim).any(|k| ijk[k] < 0 || ijk[k] >= self.nodes[k]) {
+            return None;
+        }
+        (self.page[self.block_index(ijk)] != INACTIVE).then(|| self.slot(ijk))
+    }
+
     /// Node (i, j, k) of a storage index (which may lie beyond the grid in a boundary block).
     #[inline]
     pub fn ijk(&self, slot: usize) -> [i64; 3] {

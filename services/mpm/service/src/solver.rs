@@ -18,6 +18,8 @@ pub struct MpmSolver<S: MpmSpace> {
     frames: Option<(PointFrames, u64)>,
     /// Kinetic energy above which the run is declared runaway [J].
     energy_bound: f64,
+    /// The predicted grid momentum of the current step (coupled runs).
+    raster: Vec<RasterNode>,
 }
 
 impl<S: MpmSpace> MpmSolver<S> {
@@ -34,6 +36,7 @@ impl<S: MpmSpace> MpmSolver<S> {
             pipeline,
             frames,
             energy_bound,
+            raster: Vec::new(),
         };
         solver.write_frame(0)?;
         Ok(solver)
@@ -99,26 +102,16 @@ fn runaway_bound<S: MpmSpace>(scene: &Scene, pts: &Points<S>, params: &MpmParams
     100.0 * (ke + mass * g * extent + 0.5 * mass * wall_speed * wall_speed + loads).max(f64::MIN_POSITIVE)
 }
 
-impl<S: MpmSpace> Solver for MpmSolver<S> {
-    fn predict(&mut self, _window: &StepWindow) -> anyhow::Result<usize> {
-        bail!("the MPM side of a coupled run (grid momentum to the coupler, Yue 2018 Alg. 20/21) is not in this build")
-    }
+fn step_failed(step: u64, time: f64, e: impl std::fmt::Display) -> anyhow::Error {
+    anyhow::anyhow!(
+        "MPM step {step} (t = {time:.6e} s): {e}; likely cause: a time step too large for the stiffness (CFL) or the flow speed, \
+         or material driven into the domain's edge"
+    )
+}
 
-    fn write_raster(&mut self, _window: &StepWindow, _out: &mut [RasterNode]) {}
-
-    fn finish(&mut self, _window: &StepWindow, _velocities: &[NodeVelocity]) -> anyhow::Result<()> {
-        bail!("the MPM side of a coupled run is not in this build")
-    }
-
-    fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
-        if let Err(e) = self.pipeline.step(&mut self.points, &self.params, window.dt) {
-            bail!(
-                "MPM step {} (t = {:.6e} s): {e}; likely cause: a time step too large for the stiffness (CFL) or the flow speed, \
-                 or material driven into the domain's edge",
-                window.step,
-                self.pipeline.time
-            );
-        }
+impl<S: MpmSpace> MpmSolver<S> {
+    /// After a step: runaway energy and frames.
+    fn after_step(&mut self, window: &StepWindow) -> anyhow::Result<()> {
         let (ke, _) = totals(&self.points);
         if ke > self.energy_bound {
             bail!(
@@ -135,6 +128,62 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             self.write_frame(window.step)?;
         }
         Ok(())
+    }
+}
+
+impl<S: MpmSpace> Solver for MpmSolver<S> {
+    /// Phase 1 (Yue 2018 Alg. 20), then the raster of the predicted grid momentum: every node
+    /// with material, its weighted mass and momentum m v after the force update, by node index.
+    fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize> {
+        let time = self.pipeline.time;
+        self.pipeline
+            .phase1(&self.points, &self.params, window.dt)
+            .map_err(|e| step_failed(window.step, time, e))?;
+        let grid = self.params.grid;
+        self.raster.clear();
+        self.pipeline.for_each_node_mut(|ijk, mass, v| {
+            let node = grid.index(ijk).expect("stored nodes with mass lie inside the grid");
+            self.raster.push(RasterNode {
+                node,
+                mass,
+                momentum: S::to_array(*v * mass),
+            });
+        });
+        self.raster.sort_unstable_by_key(|r| r.node);
+        Ok(self.raster.len())
+    }
+
+    fn write_raster(&mut self, _window: &StepWindow, out: &mut [RasterNode]) {
+        out.copy_from_slice(&self.raster);
+    }
+
+    /// The coupler's velocities on the shared nodes, then phase 2 (Alg. 21).
+    fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()> {
+        let grid = self.params.grid;
+        for nv in velocities {
+            let ijk = grid.ijk(nv.node);
+            let Some(v) = self.pipeline.node_velocity_mut(ijk) else {
+                bail!(
+                    "MPM step {}: the coupler constrained node {} where the MPM has no material",
+                    window.step,
+                    nv.node
+                );
+            };
+            *v = S::from_array(nv.velocity);
+        }
+        let time = self.pipeline.time;
+        self.pipeline
+            .phase2(&mut self.points, &self.params, window.dt)
+            .map_err(|e| step_failed(window.step, time, e))?;
+        self.after_step(window)
+    }
+
+    fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
+        let time = self.pipeline.time;
+        self.pipeline
+            .step(&mut self.points, &self.params, window.dt)
+            .map_err(|e| step_failed(window.step, time, e))?;
+        self.after_step(window)
     }
 
     fn report(&self) -> SolverReport {

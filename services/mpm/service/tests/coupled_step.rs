@@ -1,0 +1,72 @@
+//! The MPM half of a coupled step (Yue 2018 Alg. 20, the raster, Alg. 21) against the MPM step
+//! alone: a coupler that hands every node its own predicted velocity back changes nothing, and
+//! the raster carries the points' mass and, with no forces, their momentum.
+
+use grains_grid::D2;
+use grains_mpm_service::{setup, solver::MpmSolver};
+use grains_protocol::scene;
+use grains_protocol::wire::{NodeVelocity, RasterNode};
+use grains_service::solver::{Solver, StepWindow};
+
+fn scene() -> scene::Scene {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../tests/scenes/mpm_small_2d.toml");
+    scene::load(&path).expect("test scene")
+}
+
+fn solver(s: &scene::Scene) -> MpmSolver<D2> {
+    let (points, params) = setup::build::<D2>(s).unwrap();
+    MpmSolver::new(s, points, params, None).unwrap()
+}
+
+#[test]
+fn predict_and_finish_with_the_predicted_velocities_is_the_step_alone() {
+    let s = scene();
+    let (mut alone, mut coupled) = (solver(&s), solver(&s));
+    for step in 1..=30 {
+        let w = StepWindow::of(&s, step);
+        alone.step_alone(&w).unwrap();
+        let n = coupled.predict(&w).unwrap();
+        let mut raster = vec![RasterNode::default(); n];
+        coupled.write_raster(&w, &mut raster);
+        assert!(raster.windows(2).all(|r| r[0].node < r[1].node), "raster sorted by node");
+        if step == 1 {
+            // At rest before the first step: the grid carries every point's mass.
+            let mass: f64 = raster.iter().map(|r| r.mass).sum();
+            let points: f64 = coupled.points.mass.iter().sum();
+            assert!((mass - points).abs() < 1e-12 * points, "{mass} vs {points}");
+        }
+        let velocities: Vec<NodeVelocity> = raster
+            .iter()
+            .map(|r| NodeVelocity {
+                node: r.node,
+                velocity: r.momentum.map(|p| p / r.mass),
+            })
+            .collect();
+        coupled.finish(&w, &velocities).unwrap();
+    }
+    let (a, c) = (&alone.points, &coupled.points);
+    assert_eq!(a.id, c.id);
+    for k in 0..a.len() {
+        // m v / m differs from v by rounding only.
+        assert!((a.v[k] - c.v[k]).length() < 1e-12, "point {k}: {:?} vs {:?}", a.v[k], c.v[k]);
+        assert!((a.x[k] - c.x[k]).length() < 1e-12, "point {k}");
+    }
+}
+
+#[test]
+fn a_velocity_on_a_node_without_material_is_refused() {
+    let s = scene();
+    let mut coupled = solver(&s);
+    let w = StepWindow::of(&s, 1);
+    coupled.predict(&w).unwrap();
+    let err = coupled
+        .finish(
+            &w,
+            &[NodeVelocity {
+                node: 0,
+                velocity: [1.0, 0.0, 0.0],
+            }],
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("no material"), "{err}");
+}
