@@ -5,10 +5,12 @@
 //! - [`solver`]: the participant loop of a solver (DEM or MPM) behind the [`solver::Solver`]
 //!   trait, which the physics services implement;
 //! - [`synthetic`]: the synthetic solver of test scenes (issue 2), clearly apart from physics;
+//! - [`grid`]: the scene's background grid and kernel, shared by the MPM and the DEM's rasters;
 //! - [`vtu`]: VTU frames of point clouds (grains, material points) for ParaView;
 //! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares.
 
 pub mod cli;
+pub mod grid;
 pub mod session;
 pub mod signals;
 pub mod solver;

@@ -2,12 +2,15 @@
 
 use crate::frames::FrameWriter;
 use anyhow::bail;
+use grains_dem::coupling;
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemState, WallShape};
+use grains_grid::{Grid, Kernel};
 use grains_protocol::scene::Scene;
 use grains_protocol::wire::{NodeVelocity, RasterNode};
 use grains_service::solver::{Solver, SolverReport, StepWindow};
+use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
     pub state: DemState<S>,
@@ -19,6 +22,13 @@ pub struct DemSolver<S: Space> {
     walls_log: Option<std::io::BufWriter<std::fs::File>>,
     /// Kinetic energy above which the run is declared runaway [J].
     energy_bound: f64,
+    /// The MPM's grid and kernel, for the raster of a coupled step.
+    grid: Grid,
+    kernel: Kernel,
+    /// A coupled step in progress: the hybrid grains (scale < 1) by id with their positions at
+    /// the start of the step, and the raster of their predicted momentum.
+    hybrid: HashMap<u64, S::V>,
+    raster: Vec<coupling::NodeMomentum<S>>,
 }
 
 impl<S: Space> DemSolver<S> {
@@ -49,6 +59,10 @@ impl<S: Space> DemSolver<S> {
             frames: frames.map(|f| (f, scene.output.frames_every)),
             walls_log,
             energy_bound,
+            grid: grains_service::grid::scene_grid(scene).0,
+            kernel: grains_service::grid::scene_grid(scene).1,
+            hybrid: HashMap::new(),
+            raster: Vec::new(),
         };
         if let Some((f, _)) = &mut solver.frames {
             f.write(0, &solver.state, &solver.pipeline)?;
@@ -104,20 +118,82 @@ fn runaway_bound<S: Space>(scene: &Scene, state: &DemState<S>) -> f64 {
 }
 
 impl<S: Space> Solver for DemSolver<S> {
-    fn predict(&mut self, _window: &StepWindow) -> anyhow::Result<usize> {
-        bail!("the DEM side of a coupled run (rasterized predicted momentum, Yue 2018 Alg. 4) is not in this build")
+    /// Yue 2018 Alg. 2: saves the hybrid grains' positions, runs the k substeps (hybrid grains
+    /// with mass and springs scaled by 1 − w), and rasterizes their predicted momentum at the
+    /// saved positions onto the MPM grid with its weights (Alg. 4).
+    fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize> {
+        let g = &self.state.grains;
+        // Frozen grains never move: never hybrid.
+        self.hybrid = (0..g.len())
+            .filter(|&i| g.scale[i] < 1.0 && !g.frozen[i])
+            .map(|i| (g.id[i], g.x[i]))
+            .collect();
+        let dt = window.dt / self.substeps as f64;
+        self.pipeline.run(&mut self.state, dt, self.substeps as usize);
+        self.check(window.step, dt)?;
+        let g = &self.state.grains;
+        let saved: Vec<S::V> = (0..g.len()).map(|i| self.hybrid.get(&g.id[i]).copied().unwrap_or(g.x[i])).collect();
+        let mass: Vec<f64> = (0..g.len()).map(|i| g.mass[i] * g.scale[i]).collect();
+        let hybrid = &self.hybrid;
+        self.raster = coupling::rasterize::<S>(&self.grid, self.kernel, &saved, &g.v, &mass, |i| hybrid.contains_key(&g.id[i]));
+        Ok(self.raster.len())
     }
 
-    fn write_raster(&mut self, _window: &StepWindow, _out: &mut [RasterNode]) {}
+    fn write_raster(&mut self, _window: &StepWindow, out: &mut [RasterNode]) {
+        for (o, r) in out.iter_mut().zip(&self.raster) {
+            *o = RasterNode {
+                node: r.node,
+                mass: r.mass,
+                momentum: S::to_array(r.momentum),
+            };
+        }
+    }
 
-    fn finish(&mut self, _window: &StepWindow, _velocities: &[NodeVelocity]) -> anyhow::Result<()> {
-        bail!("the DEM side of a coupled run is not in this build")
+    /// Alg. 5 and 6: every hybrid grain takes the velocity interpolated from the coupler's
+    /// node velocities (its own raster's elsewhere) and moves from its saved position with it;
+    /// the other grains keep their substepped state.
+    fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()> {
+        if !self.hybrid.is_empty() {
+            let constrained: HashMap<u64, S::V> = velocities.iter().map(|v| (v.node, S::from_array(v.velocity))).collect();
+            let own: HashMap<u64, S::V> = self.raster.iter().map(|r| (r.node, r.momentum * (1.0 / r.mass))).collect();
+            let node_velocity = |n: u64| constrained.get(&n).or_else(|| own.get(&n)).copied();
+            let g = &mut self.state.grains;
+            for i in 0..g.len() {
+                if let Some(&x0) = self.hybrid.get(&g.id[i]) {
+                    let v = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
+                    g.v[i] = v;
+                    g.x[i] = x0 + v * window.dt;
+                }
+            }
+            self.pipeline.invalidate();
+        }
+        self.after_step(window)
     }
 
     fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
         let dt = window.dt / self.substeps as f64;
         self.pipeline.run(&mut self.state, dt, self.substeps as usize);
         self.check(window.step, dt)?;
+        self.after_step(window)
+    }
+
+    fn report(&self) -> SolverReport {
+        let g = &self.state.grains;
+        let p = S::to_array(DemPipeline::momentum(&self.state));
+        SolverReport {
+            n_items: g.len() as u64,
+            n_nodes: self.raster.len() as u64,
+            mass: g.mass.iter().zip(&g.scale).map(|(m, s)| m * s).sum(),
+            momentum: p,
+            kinetic_energy: DemPipeline::kinetic_energy(&self.state),
+            checksum: 0,
+        }
+    }
+}
+
+impl<S: Space> DemSolver<S> {
+    /// After a step: the walls' loads and the frames.
+    fn after_step(&mut self, window: &StepWindow) -> anyhow::Result<()> {
         if let Some(log) = &mut self.walls_log {
             use std::io::Write as _;
             let mut row = format!("{},{}", window.step, self.state.time);
@@ -141,18 +217,5 @@ impl<S: Space> Solver for DemSolver<S> {
             f.write(window.step, &self.state, &self.pipeline)?;
         }
         Ok(())
-    }
-
-    fn report(&self) -> SolverReport {
-        let g = &self.state.grains;
-        let p = S::to_array(DemPipeline::momentum(&self.state));
-        SolverReport {
-            n_items: g.len() as u64,
-            n_nodes: 0,
-            mass: g.mass.iter().zip(&g.scale).map(|(m, s)| m * s).sum(),
-            momentum: p,
-            kinetic_energy: DemPipeline::kinetic_energy(&self.state),
-            checksum: 0,
-        }
     }
 }

@@ -1,14 +1,14 @@
 //! Scene → material points and step parameters: the only place where the scene file meets the
 //! MPM library.
 
-use grains_grid::{Grid, Kernel, Space};
+use grains_grid::Space;
 use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
 use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
-use grains_protocol::scene::{Material, MpmDomainWalls, MpmKernel, MpmModel, Scene, Shape, WallShape};
+use grains_protocol::scene::{Material, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
 
 /// The one MPM material of a scene (one per scene in this version) and its index.
 fn mpm_material(scene: &Scene) -> Result<(usize, &Material), String> {
@@ -125,7 +125,7 @@ pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), St
     let (material_index, material) = mpm_material(scene)?;
     let h = scene.domain.cell_size;
     let per_axis = scene.mpm.points_per_axis as usize;
-    let grid = Grid::covering(scene.domain.min, scene.domain.max, h, dim);
+    let (grid, kernel) = grains_service::grid::scene_grid(scene);
     let spacing = h / per_axis as f64;
     let volume = spacing.powi(dim as i32);
     let rho = bulk_density(material);
@@ -179,10 +179,7 @@ pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), St
         .collect();
     let params = MpmParams {
         grid,
-        kernel: match scene.mpm.kernel {
-            MpmKernel::Gimp => Kernel::Gimp { half_width: 0.5 * spacing },
-            MpmKernel::Bspline => Kernel::Bspline2,
-        },
+        kernel,
         model: model(material, dim),
         gravity: vec::<S>(scene.gravity),
         transfer: match scene.mpm.flip {
