@@ -226,6 +226,12 @@ pub struct Coupling {
     pub substeps: u32,
     /// MPM share w of the mass in the hybrid zone (DEM takes 1 − w).
     pub weight: f64,
+    /// Layered zones of a hybrid body (Yue 2018 §4.3), fixed to the material: grains only
+    /// within this depth [m] of the body's free faces (those not on a wall or the domain's edge)...
+    pub discrete_layer: f64,
+    /// ... then a band of this thickness [m] where grains and points overlap and are coupled;
+    /// points only below it.
+    pub hybrid_band: f64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1046,8 +1052,14 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         });
     }
 
+    let band_default = 2.0 * domain.cell_size;
     let coupling = match &raw.coupling {
-        None => Coupling { substeps: 10, weight: 0.5 },
+        None => Coupling {
+            substeps: 10,
+            weight: 0.5,
+            discrete_layer: band_default,
+            hybrid_band: band_default,
+        },
         Some(c) => Coupling {
             substeps: match &c.substeps {
                 None => 10,
@@ -1063,6 +1075,14 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             weight: match &c.weight {
                 None => 0.5,
                 Some(w) => in_range(ctx, w, "coupling.weight", Open(0.0), Open(1.0))?,
+            },
+            discrete_layer: match &c.discrete_layer {
+                None => band_default,
+                Some(t) => in_range(ctx, t, "coupling.discrete_layer", Closed(0.0), Bound::None)?,
+            },
+            hybrid_band: match &c.hybrid_band {
+                None => band_default,
+                Some(t) => in_range(ctx, t, "coupling.hybrid_band", Open(0.0), Bound::None)?,
             },
         },
     };
@@ -1404,6 +1424,8 @@ pub mod raw {
     pub struct RawCoupling {
         pub substeps: Option<Spanned<u32>>,
         pub weight: Option<Spanned<f64>>,
+        pub discrete_layer: Option<Spanned<f64>>,
+        pub hybrid_band: Option<Spanned<f64>>,
     }
 
     #[derive(Deserialize)]

@@ -370,6 +370,30 @@ fn an_mpm_time_step_above_the_cfl_limit_is_refused_before_the_run() {
 }
 
 #[test]
+fn a_hybrid_scene_runs_coupled_and_processes_match_threads() {
+    let _machine = machine();
+    let out = out_dir("hybrid");
+    let out_s = out.to_str().unwrap();
+    let scene = "tests/scenes/hybrid_small_2d.toml";
+    let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    let parts = summary(&dir)["participants"].clone();
+    let roles: Vec<&str> = parts.as_array().unwrap().iter().map(|p| p["role"].as_str().unwrap()).collect();
+    assert_eq!(roles, ["dem", "mpm", "coupler"]);
+    // Both solvers carry material and the coupler constrains the nodes they share.
+    for col in ["dem_items", "mpm_items", "coupler_nodes"] {
+        let n: u64 = column(&dir, col)[0].parse().unwrap();
+        assert!(n > 0, "{col} = {n}");
+    }
+    let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
+    assert!(status.success(), "{err}");
+    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(read(&dir), read(&run_dir(&err)));
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
 fn a_packing_from_grains_pack_is_reused_by_a_scene() {
     let _machine = machine();
     let out = out_dir("pack");

@@ -6,6 +6,7 @@
 //!   trait, which the physics services implement;
 //! - [`synthetic`]: the synthetic solver of test scenes (issue 2), clearly apart from physics;
 //! - [`grid`]: the scene's background grid and kernel, shared by the MPM and the DEM's rasters;
+//! - [`zones`]: the layered zones of hybrid bodies (which grains and points exist, their weights);
 //! - [`vtu`]: VTU frames of point clouds (grains, material points) for ParaView;
 //! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares.
 
@@ -16,6 +17,7 @@ pub mod signals;
 pub mod solver;
 pub mod synthetic;
 pub mod vtu;
+pub mod zones;
 
 /// Why a participant stopped without finishing; chooses the exit code.
 #[derive(Debug, thiserror::Error)]

@@ -6,6 +6,7 @@ use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
 use grains_protocol::scene::{DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
+use grains_service::zones::{self, Layer};
 
 /// DEM step length of a scene: the macro-step over the substeps.
 pub fn dem_dt(scene: &Scene) -> f64 {
@@ -100,7 +101,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
     let mut rng = Rng::new(scene.seed);
     let mut next_id = 0u64;
     let mut from_packing = Vec::new();
-    for body in scene.bodies.iter().filter(|b| b.model == Model::Dem) {
+    for body in scene.bodies.iter().filter(|b| matches!(b.model, Model::Dem | Model::Hybrid)) {
         let mat = &scene.materials[body.material];
         let Some(dem) = &mat.dem else { continue };
         let r_max = dem.radius + 2.0 * dem.radius_std;
@@ -145,11 +146,22 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
                 continue;
             }
             let r = radius(&mut rng, dem.radius, dem.radius_std);
+            // Hybrid bodies: grains in the discrete layer and the hybrid band only, the band's
+            // with mass and springs scaled by 1 − w.
+            let scale = match body.model {
+                Model::Hybrid => match zones::layer(scene, body, S::to_array(x)) {
+                    Layer::Continuum => continue,
+                    Layer::Hybrid => 1.0 - scene.coupling.weight,
+                    Layer::Discrete => 1.0,
+                },
+                Model::Dem | Model::Mpm => 1.0,
+            };
             from_packing.push(false);
             let i = state
                 .grains
                 .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
             state.grains.frozen[i] = body.frozen;
+            state.grains.scale[i] = scale;
             next_id += 1;
         }
     }
@@ -190,6 +202,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
         for (i, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
             let j = state.grains.push(old.id[i], old.x[i], old.radius[i], old.mass[i], old.material[i]);
             state.grains.frozen[j] = old.frozen[i];
+            state.grains.scale[j] = old.scale[i];
         }
     }
     Ok(state)

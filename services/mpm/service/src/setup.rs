@@ -8,15 +8,12 @@ use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
-use grains_protocol::scene::{Material, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
+use grains_protocol::scene::{Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
+use grains_service::zones::{self, Layer};
 
 /// The one MPM material of a scene (one per scene in this version) and its index.
 fn mpm_material(scene: &Scene) -> Result<(usize, &Material), String> {
-    let mut used = scene
-        .bodies
-        .iter()
-        .filter(|b| b.model != grains_protocol::scene::Model::Dem)
-        .map(|b| b.material);
+    let mut used = scene.bodies.iter().filter(|b| b.model != BodyModel::Dem).map(|b| b.material);
     let Some(first) = used.next() else {
         return Err("the scene has no mpm or hybrid body".into());
     };
@@ -71,12 +68,7 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     let h = scene.domain.cell_size;
     // The outer three node layers of every domain face are its wall (DOMAIN_WALL_NODES).
     let margin = (DOMAIN_WALL_NODES - 1) as f64 * h;
-    for (k, b) in scene
-        .bodies
-        .iter()
-        .enumerate()
-        .filter(|(_, b)| b.model == grains_protocol::scene::Model::Mpm)
-    {
+    for (k, b) in scene.bodies.iter().enumerate().filter(|(_, b)| b.model != BodyModel::Dem) {
         let (lo, hi) = match b.shape {
             Shape::Box { min, max } => (min, max),
             Shape::Ball { center, radius } => (center.map(|c| c - radius), center.map(|c| c + radius)),
@@ -131,7 +123,7 @@ pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), St
     let rho = bulk_density(material);
     let packing = material.mpm.as_ref().map_or(1.0, |m| m.packing);
     let mut pts = Points::<S>::default();
-    for body in scene.bodies.iter().filter(|b| b.model == grains_protocol::scene::Model::Mpm) {
+    for body in scene.bodies.iter().filter(|b| b.model != BodyModel::Dem) {
         debug_assert_eq!(body.material, material_index);
         let region = match body.shape {
             Shape::Box { min, max } => Region::Box { min, max },
@@ -139,7 +131,17 @@ pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), St
         };
         let first = pts.len();
         for x in seed::<S>(region, grid.origin, h, per_axis) {
+            // Hybrid bodies: points in the hybrid band (weight w) and below it only.
+            let weight = match body.model {
+                BodyModel::Hybrid => match zones::layer(scene, body, S::to_array(x)) {
+                    Layer::Discrete => continue,
+                    Layer::Hybrid => scene.coupling.weight,
+                    Layer::Continuum => 1.0,
+                },
+                BodyModel::Mpm | BodyModel::Dem => 1.0,
+            };
             pts.push(x, rho * volume, volume, packing);
+            *pts.weight.last_mut().expect("just pushed") = weight;
         }
         if body.confining_pressure > 0.0
             && let Shape::Box { min, max } = body.shape
