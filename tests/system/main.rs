@@ -393,6 +393,53 @@ fn a_hybrid_scene_runs_coupled_and_processes_match_threads() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// Yue 2018 Alg. 3 between the real solvers (in this process): on the nodes the DEM and the
+/// MPM share, the coupling conserves their summed momentum to round-off and gives both the
+/// same velocity, p_d + p_c over m_d + m_c; the solvers then finish their steps with it.
+#[test]
+fn the_coupling_step_conserves_momentum_between_the_real_solvers() {
+    use grains_protocol::wire::{NodeVelocity, RasterNode};
+    use grains_service::solver::{Solver, StepWindow};
+    let path = repo().join("tests/scenes/hybrid_small_2d.toml");
+    let s = grains_protocol::scene::load(&path).unwrap();
+    let mut dem =
+        grains_dem_service::solver::DemSolver::<grains_grid::D2>::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None)
+            .unwrap();
+    let (points, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&s).unwrap();
+    let mut mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+    let mut shared_total = 0;
+    for step in 1..=20 {
+        let w = StepWindow::of(&s, step);
+        let mut rd = vec![RasterNode::default(); dem.predict(&w).unwrap()];
+        dem.write_raster(&w, &mut rd);
+        let mut rm = vec![RasterNode::default(); mpm.predict(&w).unwrap()];
+        mpm.write_raster(&w, &mut rm);
+        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&rd, &rm)];
+        let r = grains_coupler::constrain(&rd, &rm, &mut out);
+        shared_total += out.len();
+        let scale: f64 = rd.iter().chain(&rm).map(|n| n.momentum.iter().map(|p| p.abs()).sum::<f64>()).sum();
+        for c in 0..3 {
+            assert!(
+                (r.momentum_after[c] - r.momentum_before[c]).abs() <= 1e-13 * scale,
+                "step {step}: {:?} vs {:?}",
+                r.momentum_after,
+                r.momentum_before
+            );
+        }
+        for v in &out {
+            let d = rd.iter().find(|n| n.node == v.node).unwrap();
+            let m = rm.iter().find(|n| n.node == v.node).unwrap();
+            for c in 0..3 {
+                let want = (d.momentum[c] + m.momentum[c]) / (d.mass + m.mass);
+                assert!((v.velocity[c] - want).abs() <= 1e-15 * (1.0 + want.abs()));
+            }
+        }
+        dem.finish(&w, &out).unwrap();
+        mpm.finish(&w, &out).unwrap();
+    }
+    assert!(shared_total > 20 * 10, "the band must couple nodes every step ({shared_total})");
+}
+
 #[test]
 fn a_packing_from_grains_pack_is_reused_by_a_scene() {
     let _machine = machine();
