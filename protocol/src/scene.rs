@@ -193,6 +193,8 @@ pub struct Body {
     /// Confining pressure on the faces of a box of material points [Pa] (biaxial and triaxial
     /// tests). MPM box bodies only.
     pub confining_pressure: f64,
+    /// Initial velocity of the body's grains and points [m/s].
+    pub velocity: [f64; 3],
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -976,6 +978,13 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             }
             Some(p) => in_range(ctx, p, &f("confining_pressure"), Closed(0.0), Bound::None)?,
         };
+        let velocity = match &b.velocity {
+            None => [0.0; 3],
+            Some(v) if frozen => {
+                return Err(ctx.err(Some(v.span()), Some(&f("velocity")), "a frozen body cannot move".into()));
+            }
+            Some(v) => vec3(ctx, dim, v, &f("velocity"))?,
+        };
         bodies.push(Body {
             material,
             model,
@@ -983,6 +992,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             packing,
             frozen,
             confining_pressure,
+            velocity,
         });
     }
 
@@ -1399,6 +1409,7 @@ pub mod raw {
         pub packing: Option<Spanned<String>>,
         pub frozen: Option<Spanned<bool>>,
         pub confining_pressure: Option<Spanned<f64>>,
+        pub velocity: Option<Spanned<Vec<f64>>>,
     }
 
     #[derive(Deserialize)]

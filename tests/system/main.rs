@@ -440,6 +440,63 @@ fn the_coupling_step_conserves_momentum_between_the_real_solvers() {
     assert!(shared_total > 20 * 10, "the band must couple nodes every step ({shared_total})");
 }
 
+/// A hybrid block translating without gravity keeps its shape (issue 5): over 0.5 s every grain
+/// and every material point moves by v t to within 0.01 grain diameter, so the two halves of the
+/// band never drift apart. Run in this process with the real solvers and the coupler's solve.
+#[test]
+fn a_translating_hybrid_block_keeps_its_shape() {
+    use grains_protocol::wire::{NodeVelocity, RasterNode};
+    use grains_service::solver::{Solver, StepWindow};
+    let path = repo().join("tests/scenes/hybrid_block_2d.toml");
+    let s = grains_protocol::scene::load(&path).unwrap();
+    let mut dem =
+        grains_dem_service::solver::DemSolver::<grains_grid::D2>::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None)
+            .unwrap();
+    let (points, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&s).unwrap();
+    let mut mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+    let x_dem: std::collections::HashMap<u64, [f64; 2]> = (0..dem.state.grains.len())
+        .map(|i| (dem.state.grains.id[i], dem.state.grains.x[i].to_array()))
+        .collect();
+    let x_mpm: Vec<[f64; 2]> = mpm.points.x.iter().map(|x| x.to_array()).collect();
+    assert!(dem.state.grains.scale.iter().any(|&s| s < 1.0) && mpm.points.weight.iter().any(|&w| w < 1.0));
+    let mut shared = 0;
+    for step in 1..=s.steps {
+        let w = StepWindow::of(&s, step);
+        let mut rd = vec![RasterNode::default(); dem.predict(&w).unwrap()];
+        dem.write_raster(&w, &mut rd);
+        let mut rm = vec![RasterNode::default(); mpm.predict(&w).unwrap()];
+        mpm.write_raster(&w, &mut rm);
+        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&rd, &rm)];
+        grains_coupler::constrain(&rd, &rm, &mut out);
+        shared += out.len();
+        dem.finish(&w, &out).unwrap();
+        mpm.finish(&w, &out).unwrap();
+    }
+    assert!(shared > 0);
+    let t = s.steps as f64 * s.dt;
+    let moved = [0.1 * t, 0.05 * t];
+    let tolerance = 0.01 * 1e-3;
+    let g = &dem.state.grains;
+    let worst_grain = (0..g.len())
+        .map(|i| {
+            let (x0, x) = (x_dem[&g.id[i]], g.x[i].to_array());
+            ((x[0] - x0[0] - moved[0]).powi(2) + (x[1] - x0[1] - moved[1]).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max);
+    let p = &mpm.points;
+    let worst_point = (0..p.len())
+        .map(|k| {
+            let (x0, x) = (x_mpm[p.id[k] as usize], p.x[k].to_array());
+            ((x[0] - x0[0] - moved[0]).powi(2) + (x[1] - x0[1] - moved[1]).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max);
+    eprintln!("after {t} s: grains off v t by at most {worst_grain:.3e} m, points by {worst_point:.3e} m");
+    assert!(
+        worst_grain < tolerance && worst_point < tolerance,
+        "grains {worst_grain:.3e} m, points {worst_point:.3e} m"
+    );
+}
+
 #[test]
 fn a_packing_from_grains_pack_is_reused_by_a_scene() {
     let _machine = machine();

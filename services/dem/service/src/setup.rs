@@ -134,6 +134,9 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
                         .grains
                         .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
                     state.grains.frozen[i] = a.kind == 2 || body.frozen;
+                    if !state.grains.frozen[i] {
+                        state.grains.v[i] = S::from_array(body.velocity);
+                    }
                     next_id += 1;
                 }
             }
@@ -162,6 +165,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
                 .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
             state.grains.frozen[i] = body.frozen;
             state.grains.scale[i] = scale;
+            state.grains.v[i] = S::from_array(body.velocity);
             next_id += 1;
         }
     }
@@ -203,6 +207,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
             let j = state.grains.push(old.id[i], old.x[i], old.radius[i], old.mass[i], old.material[i]);
             state.grains.frozen[j] = old.frozen[i];
             state.grains.scale[j] = old.scale[i];
+            state.grains.v[j] = old.v[i];
         }
     }
     Ok(state)

@@ -142,6 +142,7 @@ pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), St
             };
             pts.push(x, rho * volume, volume, packing);
             *pts.weight.last_mut().expect("just pushed") = weight;
+            *pts.v.last_mut().expect("just pushed") = S::from_array(body.velocity);
         }
         if body.confining_pressure > 0.0
             && let Shape::Box { min, max } = body.shape
