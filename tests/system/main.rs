@@ -497,6 +497,74 @@ fn a_translating_hybrid_block_keeps_its_shape() {
     );
 }
 
+/// A hybrid layer at rest under gravity stays at rest (issue 5): once it has settled (0.3 s) its
+/// kinetic energy is under a tenth of its peak and under 1e-6 of m g d (the work of lowering
+/// all of it by one grain diameter), and over the next 0.5 s its free surface (the top of the
+/// grains, column by column) moves by less than 0.1 grain diameter.
+#[test]
+fn a_hybrid_layer_at_rest_stays_at_rest() {
+    use grains_protocol::wire::{NodeVelocity, RasterNode};
+    use grains_service::solver::{Solver, StepWindow};
+    let path = repo().join("tests/scenes/hybrid_pile_2d.toml");
+    let s = grains_protocol::scene::load(&path).unwrap();
+    let mut dem =
+        grains_dem_service::solver::DemSolver::<grains_grid::D2>::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None)
+            .unwrap();
+    let (points, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&s).unwrap();
+    let mut mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+    let surface = |dem: &grains_dem_service::solver::DemSolver<grains_grid::D2>| {
+        let g = &dem.state.grains;
+        let mut top = [f64::NEG_INFINITY; 20];
+        for i in (0..g.len()).filter(|&i| !g.frozen[i]) {
+            let c = ((g.x[i].x / 0.002) as usize).min(19);
+            top[c] = top[c].max(g.x[i].y + g.radius[i]);
+        }
+        top
+    };
+    let energy = |dem: &grains_dem_service::solver::DemSolver<grains_grid::D2>,
+                  mpm: &grains_mpm_service::solver::MpmSolver<grains_grid::D2>| {
+        dem.report().kinetic_energy + mpm.report().kinetic_energy
+    };
+    let (settled, end) = ((0.3 / s.dt).round() as u64, (0.8 / s.dt).round() as u64);
+    let mut peak: f64 = 0.0;
+    let mut at_rest = None;
+    let m_g_d = (dem.report().mass + mpm.report().mass) * 9.81 * 1e-3;
+    for step in 1..=end {
+        let w = StepWindow::of(&s, step);
+        let mut rd = vec![RasterNode::default(); dem.predict(&w).unwrap()];
+        dem.write_raster(&w, &mut rd);
+        let mut rm = vec![RasterNode::default(); mpm.predict(&w).unwrap()];
+        mpm.write_raster(&w, &mut rm);
+        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&rd, &rm)];
+        grains_coupler::constrain(&rd, &rm, &mut out);
+        dem.finish(&w, &out).unwrap();
+        mpm.finish(&w, &out).unwrap();
+        let e = energy(&dem, &mpm);
+        peak = peak.max(e);
+        if step >= settled {
+            assert!(
+                e < 0.1 * peak && e < 1e-6 * m_g_d,
+                "step {step}: {e} J (peak {peak} J, m g d {m_g_d} J)"
+            );
+        }
+        if step == settled {
+            at_rest = Some(surface(&dem));
+        }
+    }
+    let (before, after) = (at_rest.unwrap(), surface(&dem));
+    let moved = before
+        .iter()
+        .zip(&after)
+        .filter(|(b, _)| b.is_finite())
+        .map(|(b, a)| (a - b).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "free surface moved by at most {moved:.3e} m over 0.5 s; kinetic energy {:.3e} J (peak {peak:.3e} J, m g d {m_g_d:.3e} J)",
+        energy(&dem, &mpm)
+    );
+    assert!(moved < 0.1 * 1e-3, "the free surface moved by {moved} m");
+}
+
 #[test]
 fn a_packing_from_grains_pack_is_reused_by_a_scene() {
     let _machine = machine();

@@ -140,6 +140,8 @@ pub trait Space: Copy + Debug + Default + Send + Sync + 'static {
     /// Orientation as a quaternion (2D: rotation about z), for output.
     fn rot_quat(rot: Self::Rot) -> [f64; 4];
     fn ang_array(a: Self::Ang) -> [f64; 3];
+    /// An angular vector from its components (2D: the z component).
+    fn ang_from_array(a: [f64; 3]) -> Self::Ang;
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -185,6 +187,10 @@ impl Space for D2 {
     fn ang_array(a: f64) -> [f64; 3] {
         [0.0, 0.0, a]
     }
+    #[inline]
+    fn ang_from_array(a: [f64; 3]) -> f64 {
+        a[2]
+    }
 }
 
 impl Space for D3 {
@@ -226,6 +232,10 @@ impl Space for D3 {
     }
     fn ang_array(a: DVec3) -> [f64; 3] {
         a.to_array()
+    }
+    #[inline]
+    fn ang_from_array(a: [f64; 3]) -> DVec3 {
+        DVec3::from_array(a)
     }
 }
 

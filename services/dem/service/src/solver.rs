@@ -150,7 +150,8 @@ impl<S: Space> Solver for DemSolver<S> {
     }
 
     /// Alg. 5 and 6: every hybrid grain takes the velocity interpolated from the coupler's
-    /// node velocities (its own raster's elsewhere) and moves from its saved position with it;
+    /// node velocities (its own raster's elsewhere) and the spin of that field, and moves from
+    /// its saved position with that velocity;
     /// the other grains keep their substepped state.
     fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()> {
         if !self.hybrid.is_empty() {
@@ -160,8 +161,9 @@ impl<S: Space> Solver for DemSolver<S> {
             let g = &mut self.state.grains;
             for i in 0..g.len() {
                 if let Some(&x0) = self.hybrid.get(&g.id[i]) {
-                    let v = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
+                    let (v, spin) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
                     g.v[i] = v;
+                    g.omega[i] = spin;
                     g.x[i] = x0 + v * window.dt;
                 }
             }
