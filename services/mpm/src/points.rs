@@ -197,13 +197,15 @@ pub fn confine<S: MpmSpace>(pts: &mut Points<S>, range: std::ops::Range<usize>, 
     }
 }
 
-/// Kinetic energy [J] and momentum of the points.
+/// Kinetic energy [J] and momentum of the points, with their masses scaled by their hybrid
+/// weights (the share of the material the continuum carries, as the DEM scales its grains).
 pub fn totals<S: MpmSpace>(pts: &Points<S>) -> (f64, S::V) {
     let mut ke = 0.0;
     let mut p = S::V::default();
     for k in 0..pts.len() {
-        ke += 0.5 * pts.mass[k] * pts.v[k].length_squared();
-        p += pts.v[k] * pts.mass[k];
+        let m = pts.mass[k] * pts.weight[k];
+        ke += 0.5 * m * pts.v[k].length_squared();
+        p += pts.v[k] * m;
     }
     (ke, p)
 }
