@@ -66,3 +66,86 @@ pub fn layer(scene: &Scene, body: &Body, x: [f64; 3]) -> Layer {
         Layer::Continuum
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SCENE: &str = r#"
+schema = 1
+[run]
+dimension = 2
+dt = 1e-5
+steps = 1
+[domain]
+min = [-0.006, -0.006]
+max = [0.1, 0.1]
+cell_size = 0.002
+[[material]]
+name = "m"
+density = 2500.0
+[material.dem]
+radius = 5e-4
+stiffness_normal = 1e6
+restitution = 0.5
+friction = 0.5
+[material.mpm]
+young = 1e6
+poisson = 0.3
+friction_angle = 20.0
+packing = 0.8
+[[body]]
+material = "m"
+model = "hybrid"
+shape = "box"
+min = [0.0, 0.0015]
+max = [0.04, 0.0815]
+[[body]]
+material = "m"
+model = "hybrid"
+shape = "ball"
+center = [0.07, 0.05]
+radius = 0.01
+[[wall]]
+kind = "plane"
+point = [0.0, 0.0]
+normal = [0.0, 1.0]
+[[wall]]
+kind = "plane"
+point = [0.0, 0.0]
+normal = [1.0, 0.0]
+[coupling]
+discrete_layer = 0.004
+hybrid_band = 0.003
+"#;
+
+    fn scene() -> Scene {
+        let path = std::env::temp_dir().join(format!("grains-zones-{}.toml", std::process::id()));
+        std::fs::write(&path, SCENE).unwrap();
+        let s = grains_protocol::scene::load(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        s
+    }
+
+    /// The column rests on the floor (0.0015 m above the plane, within a cell) and leans on the
+    /// left wall: its depth is measured from the top and the right face only.
+    #[test]
+    fn depth_counts_free_faces_only() {
+        let s = scene();
+        let column = &s.bodies[0];
+        // Near the floor and the left wall, far from the free faces.
+        assert!((depth(&s, column, [0.001, 0.002, 0.0]) - 0.039).abs() < 1e-12);
+        // 1 mm under the top.
+        assert!((depth(&s, column, [0.01, 0.0805, 0.0]) - 0.001).abs() < 1e-12);
+        assert_eq!(layer(&s, column, [0.01, 0.0805, 0.0]), Layer::Discrete);
+        // 5 mm from the right face: in the band (4 to 7 mm); 8 mm: continuum.
+        assert_eq!(layer(&s, column, [0.035, 0.04, 0.0]), Layer::Hybrid);
+        assert_eq!(layer(&s, column, [0.032, 0.04, 0.0]), Layer::Continuum);
+        // A disk: depth from its circle.
+        let disk = &s.bodies[1];
+        assert!((depth(&s, disk, [0.07, 0.05, 0.0]) - 0.01).abs() < 1e-12);
+        assert_eq!(layer(&s, disk, [0.078, 0.05, 0.0]), Layer::Discrete);
+        assert_eq!(layer(&s, disk, [0.075, 0.05, 0.0]), Layer::Hybrid);
+        assert_eq!(layer(&s, disk, [0.071, 0.05, 0.0]), Layer::Continuum);
+    }
+}
