@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod bench_dem;
+pub mod bench_hybrid;
 pub mod bench_mpm;
 pub mod outputs;
 pub mod pack;

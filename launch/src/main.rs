@@ -52,6 +52,8 @@ enum BenchCmd {
     Ipc(grains_launch::bench::IpcArgs),
     /// DEM µs per grain-step on dense beds, side by side with LAMMPS.
     Dem(grains_launch::bench_dem::DemArgs),
+    /// Hybrid vs pure DEM column collapse at 100,000 grains; processes vs threads.
+    Hybrid(grains_launch::bench_hybrid::HybridArgs),
     /// MPM µs per point-step of a collapsing sand block, side by side with Taichi.
     Mpm(grains_launch::bench_mpm::MpmArgs),
 }
@@ -116,6 +118,9 @@ fn main() -> ExitCode {
         }),
         Cmd::Bench { what: BenchCmd::Ipc(args) } => grains_launch::bench::ipc(&args).map(|()| 0),
         Cmd::Bench { what: BenchCmd::Dem(args) } => grains_launch::bench_dem::dem(&args).map(|()| 0),
+        Cmd::Bench {
+            what: BenchCmd::Hybrid(args),
+        } => grains_launch::bench_hybrid::bench(&args).map(|()| 0),
         Cmd::Bench { what: BenchCmd::Mpm(args) } => grains_launch::bench_mpm::mpm(&args).map(|()| 0),
     };
     match result {
