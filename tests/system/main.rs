@@ -393,49 +393,104 @@ fn a_hybrid_scene_runs_coupled_and_processes_match_threads() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// A hybrid scene's DEM and MPM solvers driven in this process through the coupler's solve
+/// (the macro-step of protocol/README.md §6 without the transport).
+struct Hybrid {
+    scene: grains_protocol::scene::Scene,
+    dem: grains_dem_service::solver::DemSolver<grains_grid::D2>,
+    mpm: grains_mpm_service::solver::MpmSolver<grains_grid::D2>,
+}
+
+/// One exchange: both rasters and the constrained velocities with the coupler's totals.
+struct Exchange {
+    dem: Vec<grains_protocol::wire::RasterNode>,
+    mpm: Vec<grains_protocol::wire::RasterNode>,
+    velocities: Vec<grains_protocol::wire::NodeVelocity>,
+    report: grains_coupler::CouplingReport,
+}
+
+impl Hybrid {
+    fn load(scene: &str) -> Hybrid {
+        let s = grains_protocol::scene::load(&repo().join(scene)).unwrap();
+        let dem = grains_dem_service::solver::DemSolver::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None).unwrap();
+        let (points, params) = grains_mpm_service::setup::build(&s).unwrap();
+        let mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+        Hybrid { scene: s, dem, mpm }
+    }
+
+    /// Both solvers to the coupling point, and the coupler's solve.
+    fn exchange(&mut self, step: u64) -> Exchange {
+        use grains_protocol::wire::{NodeVelocity, RasterNode};
+        use grains_service::solver::{Solver, StepWindow};
+        let w = StepWindow::of(&self.scene, step);
+        let mut dem = vec![RasterNode::default(); self.dem.predict(&w).unwrap()];
+        self.dem.write_raster(&w, &mut dem);
+        let mut mpm = vec![RasterNode::default(); self.mpm.predict(&w).unwrap()];
+        self.mpm.write_raster(&w, &mut mpm);
+        let mut velocities = vec![NodeVelocity::default(); grains_coupler::count_shared(&dem, &mpm)];
+        let report = grains_coupler::constrain(&dem, &mpm, &mut velocities);
+        Exchange {
+            dem,
+            mpm,
+            velocities,
+            report,
+        }
+    }
+
+    /// Both solvers finish the step with the constrained velocities.
+    fn finish(&mut self, step: u64, x: &Exchange) {
+        use grains_service::solver::{Solver, StepWindow};
+        let w = StepWindow::of(&self.scene, step);
+        self.dem.finish(&w, &x.velocities).unwrap();
+        self.mpm.finish(&w, &x.velocities).unwrap();
+    }
+
+    /// A whole macro-step; returns the number of coupled nodes.
+    fn step(&mut self, step: u64) -> usize {
+        let x = self.exchange(step);
+        self.finish(step, &x);
+        x.velocities.len()
+    }
+
+    fn kinetic_energy(&self) -> f64 {
+        use grains_service::solver::Solver;
+        self.dem.report().kinetic_energy + self.mpm.report().kinetic_energy
+    }
+}
+
 /// Yue 2018 Alg. 3 between the real solvers (in this process): on the nodes the DEM and the
 /// MPM share, the coupling conserves their summed momentum to round-off and gives both the
 /// same velocity, p_d + p_c over m_d + m_c; the solvers then finish their steps with it.
 #[test]
 fn the_coupling_step_conserves_momentum_between_the_real_solvers() {
-    use grains_protocol::wire::{NodeVelocity, RasterNode};
-    use grains_service::solver::{Solver, StepWindow};
-    let path = repo().join("tests/scenes/hybrid_small_2d.toml");
-    let s = grains_protocol::scene::load(&path).unwrap();
-    let mut dem =
-        grains_dem_service::solver::DemSolver::<grains_grid::D2>::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None)
-            .unwrap();
-    let (points, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&s).unwrap();
-    let mut mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+    let mut h = Hybrid::load("tests/scenes/hybrid_small_2d.toml");
     let mut shared_total = 0;
     for step in 1..=20 {
-        let w = StepWindow::of(&s, step);
-        let mut rd = vec![RasterNode::default(); dem.predict(&w).unwrap()];
-        dem.write_raster(&w, &mut rd);
-        let mut rm = vec![RasterNode::default(); mpm.predict(&w).unwrap()];
-        mpm.write_raster(&w, &mut rm);
-        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&rd, &rm)];
-        let r = grains_coupler::constrain(&rd, &rm, &mut out);
-        shared_total += out.len();
-        let scale: f64 = rd.iter().chain(&rm).map(|n| n.momentum.iter().map(|p| p.abs()).sum::<f64>()).sum();
+        let x = h.exchange(step);
+        shared_total += x.velocities.len();
+        let scale: f64 = x
+            .dem
+            .iter()
+            .chain(&x.mpm)
+            .map(|n| n.momentum.iter().map(|p| p.abs()).sum::<f64>())
+            .sum();
         for c in 0..3 {
             assert!(
-                (r.momentum_after[c] - r.momentum_before[c]).abs() <= 1e-13 * scale,
+                (x.report.momentum_after[c] - x.report.momentum_before[c]).abs() <= 1e-13 * scale,
                 "step {step}: {:?} vs {:?}",
-                r.momentum_after,
-                r.momentum_before
+                x.report.momentum_after,
+                x.report.momentum_before
             );
         }
-        for v in &out {
-            let d = rd.iter().find(|n| n.node == v.node).unwrap();
-            let m = rm.iter().find(|n| n.node == v.node).unwrap();
+        for v in &x.velocities {
+            let d = x.dem.iter().find(|n| n.node == v.node).unwrap();
+            let m = x.mpm.iter().find(|n| n.node == v.node).unwrap();
             for c in 0..3 {
                 let want = (d.momentum[c] + m.momentum[c]) / (d.mass + m.mass);
                 assert!((v.velocity[c] - want).abs() <= 1e-15 * (1.0 + want.abs()));
             }
         }
-        dem.finish(&w, &out).unwrap();
-        mpm.finish(&w, &out).unwrap();
+        h.finish(step, &x);
     }
     assert!(shared_total > 20 * 10, "the band must couple nodes every step ({shared_total})");
 }
@@ -445,34 +500,17 @@ fn the_coupling_step_conserves_momentum_between_the_real_solvers() {
 /// band never drift apart. Run in this process with the real solvers and the coupler's solve.
 #[test]
 fn a_translating_hybrid_block_keeps_its_shape() {
-    use grains_protocol::wire::{NodeVelocity, RasterNode};
-    use grains_service::solver::{Solver, StepWindow};
-    let path = repo().join("tests/scenes/hybrid_block_2d.toml");
-    let s = grains_protocol::scene::load(&path).unwrap();
-    let mut dem =
-        grains_dem_service::solver::DemSolver::<grains_grid::D2>::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None)
-            .unwrap();
-    let (points, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&s).unwrap();
-    let mut mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+    let mut h = Hybrid::load("tests/scenes/hybrid_block_2d.toml");
+    let (dem, mpm) = (&h.dem, &h.mpm);
     let x_dem: std::collections::HashMap<u64, [f64; 2]> = (0..dem.state.grains.len())
         .map(|i| (dem.state.grains.id[i], dem.state.grains.x[i].to_array()))
         .collect();
     let x_mpm: Vec<[f64; 2]> = mpm.points.x.iter().map(|x| x.to_array()).collect();
     assert!(dem.state.grains.scale.iter().any(|&s| s < 1.0) && mpm.points.weight.iter().any(|&w| w < 1.0));
-    let mut shared = 0;
-    for step in 1..=s.steps {
-        let w = StepWindow::of(&s, step);
-        let mut rd = vec![RasterNode::default(); dem.predict(&w).unwrap()];
-        dem.write_raster(&w, &mut rd);
-        let mut rm = vec![RasterNode::default(); mpm.predict(&w).unwrap()];
-        mpm.write_raster(&w, &mut rm);
-        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&rd, &rm)];
-        grains_coupler::constrain(&rd, &rm, &mut out);
-        shared += out.len();
-        dem.finish(&w, &out).unwrap();
-        mpm.finish(&w, &out).unwrap();
-    }
+    let steps = h.scene.steps;
+    let shared: usize = (1..=steps).map(|step| h.step(step)).sum();
     assert!(shared > 0);
+    let (s, dem, mpm) = (&h.scene, &h.dem, &h.mpm);
     let t = s.steps as f64 * s.dt;
     let moved = [0.1 * t, 0.05 * t];
     let tolerance = 0.01 * 1e-3;
@@ -503,17 +541,10 @@ fn a_translating_hybrid_block_keeps_its_shape() {
 /// grains, column by column) moves by less than 0.1 grain diameter.
 #[test]
 fn a_hybrid_layer_at_rest_stays_at_rest() {
-    use grains_protocol::wire::{NodeVelocity, RasterNode};
-    use grains_service::solver::{Solver, StepWindow};
-    let path = repo().join("tests/scenes/hybrid_pile_2d.toml");
-    let s = grains_protocol::scene::load(&path).unwrap();
-    let mut dem =
-        grains_dem_service::solver::DemSolver::<grains_grid::D2>::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None)
-            .unwrap();
-    let (points, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&s).unwrap();
-    let mut mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
-    let surface = |dem: &grains_dem_service::solver::DemSolver<grains_grid::D2>| {
-        let g = &dem.state.grains;
+    use grains_service::solver::Solver;
+    let mut h = Hybrid::load("tests/scenes/hybrid_pile_2d.toml");
+    let surface = |h: &Hybrid| {
+        let g = &h.dem.state.grains;
         let mut top = [f64::NEG_INFINITY; 20];
         for i in (0..g.len()).filter(|&i| !g.frozen[i]) {
             let c = ((g.x[i].x / 0.002) as usize).min(19);
@@ -521,25 +552,14 @@ fn a_hybrid_layer_at_rest_stays_at_rest() {
         }
         top
     };
-    let energy = |dem: &grains_dem_service::solver::DemSolver<grains_grid::D2>,
-                  mpm: &grains_mpm_service::solver::MpmSolver<grains_grid::D2>| {
-        dem.report().kinetic_energy + mpm.report().kinetic_energy
-    };
-    let (settled, end) = ((0.3 / s.dt).round() as u64, (0.8 / s.dt).round() as u64);
+    let dt = h.scene.dt;
+    let (settled, end) = ((0.3 / dt).round() as u64, (0.8 / dt).round() as u64);
     let mut peak: f64 = 0.0;
     let mut at_rest = None;
-    let m_g_d = (dem.report().mass + mpm.report().mass) * 9.81 * 1e-3;
+    let m_g_d = (h.dem.report().mass + h.mpm.report().mass) * 9.81 * 1e-3;
     for step in 1..=end {
-        let w = StepWindow::of(&s, step);
-        let mut rd = vec![RasterNode::default(); dem.predict(&w).unwrap()];
-        dem.write_raster(&w, &mut rd);
-        let mut rm = vec![RasterNode::default(); mpm.predict(&w).unwrap()];
-        mpm.write_raster(&w, &mut rm);
-        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&rd, &rm)];
-        grains_coupler::constrain(&rd, &rm, &mut out);
-        dem.finish(&w, &out).unwrap();
-        mpm.finish(&w, &out).unwrap();
-        let e = energy(&dem, &mpm);
+        h.step(step);
+        let e = h.kinetic_energy();
         peak = peak.max(e);
         if step >= settled {
             assert!(
@@ -548,10 +568,10 @@ fn a_hybrid_layer_at_rest_stays_at_rest() {
             );
         }
         if step == settled {
-            at_rest = Some(surface(&dem));
+            at_rest = Some(surface(&h));
         }
     }
-    let (before, after) = (at_rest.unwrap(), surface(&dem));
+    let (before, after) = (at_rest.unwrap(), surface(&h));
     let moved = before
         .iter()
         .zip(&after)
@@ -560,7 +580,7 @@ fn a_hybrid_layer_at_rest_stays_at_rest() {
         .fold(0.0, f64::max);
     eprintln!(
         "free surface moved by at most {moved:.3e} m over 0.5 s; kinetic energy {:.3e} J (peak {peak:.3e} J, m g d {m_g_d:.3e} J)",
-        energy(&dem, &mpm)
+        h.kinetic_energy()
     );
     assert!(moved < 0.1 * 1e-3, "the free surface moved by {moved} m");
 }

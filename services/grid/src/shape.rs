@@ -141,11 +141,16 @@ impl Weights {
     #[inline(always)]
     fn gimp(&self, r: f64) -> (f64, f64) {
         let (h, lp) = (self.h, self.lp);
-        if lp == 0.0 {
-            return gimp(r, h, 0.0);
-        }
         let a = r.abs();
         let sign = r.signum();
+        if lp == 0.0 {
+            // A point without width: the linear hat.
+            return if a < h {
+                (1.0 - a * self.inv_h, -sign * self.inv_h)
+            } else {
+                (0.0, 0.0)
+            };
+        }
         if a >= h + lp {
             (0.0, 0.0)
         } else if a > h - lp {
@@ -170,25 +175,7 @@ pub fn axis_weights(kernel: Kernel, x: f64, h: f64) -> Axis {
 /// (Bardenhagen & Kober 2004, uGIMP), valid for lp ≤ h/2.
 #[inline]
 pub fn gimp(r: f64, h: f64, lp: f64) -> (f64, f64) {
-    if lp == 0.0 {
-        return if r.abs() < h {
-            (1.0 - r.abs() / h, -r.signum() / h)
-        } else {
-            (0.0, 0.0)
-        };
-    }
-    let a = r.abs();
-    let sign = r.signum();
-    if a >= h + lp {
-        (0.0, 0.0)
-    } else if a > h - lp {
-        let t = h + lp - a;
-        (t * t / (4.0 * h * lp), -sign * t / (2.0 * h * lp))
-    } else if a > lp {
-        (1.0 - a / h, -sign / h)
-    } else {
-        (1.0 - (r * r + lp * lp) / (2.0 * h * lp), -r / (h * lp))
-    }
+    Weights::new(Kernel::Gimp { half_width: lp }, h).gimp(r)
 }
 
 /// Calls `f(node, weight, gradient)` for every grid node a point at `x` touches (tensor

@@ -221,16 +221,7 @@ mod tests {
     use super::*;
     use glam::DQuat;
 
-    /// xorshift64: reproducible "random-ish" numbers in [−1, 1) without a dependency.
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-    }
+    use crate::test_rng::Rng;
 
     /// Checks self = Q diag Qᵀ to 1e-13 relative, QᵀQ = I, an exactly symmetric
     /// reconstruction, and (when given) the eigenvalues against the known ones.

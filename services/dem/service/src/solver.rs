@@ -35,6 +35,7 @@ impl<S: Space> DemSolver<S> {
     pub fn new(scene: &Scene, state: DemState<S>, out_dir: Option<&std::path::Path>) -> anyhow::Result<Self> {
         let pipeline = DemPipeline::new(scene.threads as usize)?;
         let energy_bound = runaway_bound(scene, &state);
+        let (grid, kernel) = grains_service::grid::scene_grid(scene);
         let frames = match out_dir {
             Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir)?),
             _ => None,
@@ -59,8 +60,8 @@ impl<S: Space> DemSolver<S> {
             frames: frames.map(|f| (f, scene.output.frames_every)),
             walls_log,
             energy_bound,
-            grid: grains_service::grid::scene_grid(scene).0,
-            kernel: grains_service::grid::scene_grid(scene).1,
+            grid,
+            kernel,
             hybrid: HashMap::new(),
             raster: Vec::new(),
         };

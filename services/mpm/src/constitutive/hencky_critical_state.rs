@@ -260,16 +260,7 @@ mod tests {
     use super::*;
     use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
 
-    /// xorshift64: reproducible numbers in [−1, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-    }
+    use crate::test_rng::Rng;
 
     fn table2() -> HenckyCriticalState {
         HenckyCriticalState::chen_2021_table_2()
