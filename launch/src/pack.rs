@@ -42,7 +42,7 @@ pub fn pack(args: &PackArgs) -> anyhow::Result<()> {
 }
 
 fn pack_in<S: Space>(scene: &Scene, args: &PackArgs) -> anyhow::Result<()> {
-    let mut state = grains_dem_service::setup::build_state::<S>(scene)?;
+    let mut state = grains_dem_service::setup::build_state::<S>(scene, &grains_service::zones::ZoneField::layered(scene))?;
     if let Some(mu) = args.friction {
         state.params.materials.iter_mut().for_each(|m| m.friction = mu);
         state.walls.iter_mut().for_each(|w| w.friction = mu);

@@ -175,6 +175,7 @@ impl Threads {
                 Role::Dem => grains_dem_service::run(&bus, &scene, &opts),
                 Role::Mpm => grains_mpm_service::run(&bus, &scene, &opts),
                 Role::Coupler => grains_coupler_service::run(&bus, &scene, &opts),
+                Role::Oracle => grains_oracle_service::run(&bus, &scene, &opts),
                 other => Err(anyhow::anyhow!("{} has no in-process participant in this build", other.binary())),
             })?;
             threads.push((role, Some(handle), stop));

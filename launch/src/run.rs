@@ -90,15 +90,15 @@ pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
     match roles.as_slice() {
         [Role::Dem] => grains_dem_service::check_scene(scene)?,
         [Role::Mpm] => grains_mpm_service::check_scene(scene)?,
-        [Role::Dem, Role::Mpm, Role::Coupler] => {
+        [Role::Dem, Role::Mpm, Role::Coupler, Role::Oracle] => {
             grains_dem_service::check_scene(scene)?;
             grains_mpm_service::check_scene(scene)?;
+            grains_oracle_service::check_scene(scene)?;
         }
         _ => {
             let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
             bail!(BadInput(format!(
-                "{}: this scene needs {}; this build runs DEM-only, MPM-only and hybrid scenes with zones layered from the scene \
-                 (the oracle process comes later): remove the [oracle] table",
+                "{}: this scene needs {}; this build runs DEM-only, MPM-only and hybrid scenes",
                 scene.path.display(),
                 list.join(", ")
             )));

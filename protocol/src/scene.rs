@@ -332,7 +332,8 @@ impl Scene {
         if dem && mpm {
             out.push(Role::Coupler);
         }
-        if self.oracle.is_some() && dem && mpm {
+        // The oracle publishes the zone field of every coupled run, fixed or adaptive.
+        if dem && mpm {
             out.push(Role::Oracle);
         }
         out

@@ -155,6 +155,8 @@ fn broken_scene_files_exit_2_naming_file_and_field() {
         ("tests/scenes/bad/empty.toml".into(), &["empty"]),
         ("tests/scenes/bad/does_not_exist.toml".into(), &["cannot read"]),
         (garbage.clone(), &["not a text file"]),
+        // Valid syntax, but a kind of oracle this build does not have.
+        ("tests/scenes/bad/oracle_kind.toml".into(), &["oracle.kind", "\"fixed\""]),
     ];
     for (file, needles) in cases {
         let (status, err) = run_to_end(&["run", &file, "--out", out.to_str().unwrap()]);
@@ -380,11 +382,20 @@ fn a_hybrid_scene_runs_coupled_and_processes_match_threads() {
     let dir = run_dir(&err);
     let parts = summary(&dir)["participants"].clone();
     let roles: Vec<&str> = parts.as_array().unwrap().iter().map(|p| p["role"].as_str().unwrap()).collect();
-    assert_eq!(roles, ["dem", "mpm", "coupler"]);
-    // Both solvers carry material and the coupler constrains the nodes they share.
-    for col in ["dem_items", "mpm_items", "coupler_nodes"] {
+    assert_eq!(roles, ["dem", "mpm", "coupler", "oracle"]);
+    // Both solvers carry material, the coupler constrains the nodes they share, the oracle
+    // published a field with hybrid cells.
+    for col in ["dem_items", "mpm_items", "coupler_nodes", "oracle_items", "oracle_nodes"] {
         let n: u64 = column(&dir, col)[0].parse().unwrap();
         assert!(n > 0, "{col} = {n}");
+    }
+    // The solvers built their grains and points from the field the oracle process sent: the
+    // same counts as from the layered field computed here.
+    {
+        use grains_service::solver::Solver;
+        let local = Hybrid::load(scene);
+        assert_eq!(column(&dir, "dem_items")[0], local.dem.report().n_items.to_string());
+        assert_eq!(column(&dir, "mpm_items")[0], local.mpm.report().n_items.to_string());
     }
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
@@ -412,8 +423,11 @@ struct Exchange {
 impl Hybrid {
     fn load(scene: &str) -> Hybrid {
         let s = grains_protocol::scene::load(&repo().join(scene)).unwrap();
-        let dem = grains_dem_service::solver::DemSolver::new(&s, grains_dem_service::setup::build_state(&s).unwrap(), None).unwrap();
-        let (points, params) = grains_mpm_service::setup::build(&s).unwrap();
+        // The oracle's field, as the participants receive it.
+        let zones = grains_service::zones::ZoneField::layered(&s);
+        let dem =
+            grains_dem_service::solver::DemSolver::new(&s, grains_dem_service::setup::build_state(&s, &zones).unwrap(), None).unwrap();
+        let (points, params) = grains_mpm_service::setup::build(&s, &zones).unwrap();
         let mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
         Hybrid { scene: s, dem, mpm }
     }

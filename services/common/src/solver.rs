@@ -4,9 +4,10 @@
 
 use crate::Halt;
 use crate::session::Session;
+use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
-use grains_protocol::wire::{Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
+use grains_protocol::wire::{Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ZoneCell};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::time::{Duration, Instant};
@@ -77,12 +78,16 @@ pub struct ParticipantOptions {
 }
 
 /// Runs one solver participant to the end of the run.
+///
+/// `make` builds the solver from the zone field: the oracle's when the run has an oracle
+/// (received before the start, so that setup does not count as step time), else the layered
+/// zones of the scene (empty without hybrid bodies).
 pub fn run<T: Transport, S: Solver>(
     transport: &T,
     role: Role,
     scene: &Scene,
     opts: &ParticipantOptions,
-    solver: &mut S,
+    make: impl FnOnce(&ZoneField) -> anyhow::Result<S>,
 ) -> anyhow::Result<()> {
     let mut session = Session::join(
         transport,
@@ -94,19 +99,34 @@ pub fn run<T: Transport, S: Solver>(
         opts.protocol_version,
     )?;
     if scene.time_owner() == role {
-        return run_alone(&mut session, scene, solver);
+        let mut solver = make(&ZoneField::layered(scene))?;
+        return run_alone(&mut session, scene, &mut solver);
     }
     let raster_spec = if role == Role::Dem { names::DEM_RASTER } else { names::MPM_RASTER };
     let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
     let mut vel_sub = session.subscriber::<NodeVelocity, StepHeader>(&names::VELOCITIES)?;
     let mut raster_pub = session.publisher::<RasterNode, StepHeader>(&raster_spec, 1024)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
-    session.wait_until("the coupler and the launcher", |_| {
+    let mut zones_sub = match scene.participants().contains(&Role::Oracle) {
+        true => Some(session.subscriber::<ZoneCell, StepHeader>(&names::ZONES)?),
+        false => None,
+    };
+    session.wait_until("the coupler, the oracle and the launcher", |_| {
         step_sub.publisher_count() >= 1
             && vel_sub.publisher_count() >= 1
             && raster_pub.subscriber_count() >= 1
             && summary_pub.subscriber_count() >= 1
+            && zones_sub.as_ref().is_none_or(|z| z.publisher_count() >= 1)
     })?;
+    let zones = match &mut zones_sub {
+        Some(sub) => session.recv(sub, "the zone field", |h, cells| -> anyhow::Result<ZoneField> {
+            session.check_message(&names::ZONES, h, 0, cells)?;
+            ZoneField::from_cells(scene, cells).map_err(|e| anyhow::anyhow!("{}: {e}", names::ZONES.name))
+        })??,
+        None => ZoneField::layered(scene),
+    };
+    let mut solver = make(&zones)?;
+    let solver = &mut solver;
     session.ready()?;
 
     loop {

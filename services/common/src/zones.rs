@@ -1,12 +1,16 @@
-//! Zones of a hybrid body given by the scene (layered hybridization, Yue 2018 §4.3): grains in
-//! a layer of `coupling.discrete_layer` under the body's free faces, then a band of
-//! `coupling.hybrid_band` where grains and material points overlap and are coupled, points only
-//! below. Zones are fixed to the material (every grain and point keeps the zone it was created
-//! in), which is how the solvers of issue 5 use them until the oracle moves them.
+//! Zones of hybrid bodies: the field of zones on grid cells that the oracle publishes
+//! ([`ZoneField`]) and the layered zones it computes from the scene (layered hybridization,
+//! Yue 2018 §4.3): grains in a layer of `coupling.discrete_layer` under a body's free faces,
+//! then a band of `coupling.hybrid_band` where grains and material points overlap and are
+//! coupled, points only below. Zones are fixed to the material (every grain and point keeps the
+//! zone it was created in) until the adaptive oracle moves them.
 //!
-//! One function for both solvers, so that grains and points agree on every boundary.
+//! Both solvers classify their material by the cell it lies in, so that grains and points agree
+//! on every boundary.
 
-use grains_protocol::scene::{Body, Scene, Shape, WallShape};
+use grains_grid::Grid;
+use grains_protocol::scene::{Body, Model, Scene, Shape, WallShape};
+use grains_protocol::wire::{Zone, ZoneCell};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Layer {
@@ -56,7 +60,10 @@ pub fn depth(scene: &Scene, body: &Body, x: [f64; 3]) -> f64 {
 
 /// The zone of material at `x` in a hybrid `body`.
 pub fn layer(scene: &Scene, body: &Body, x: [f64; 3]) -> Layer {
-    let d = depth(scene, body, x);
+    layer_of_depth(scene, depth(scene, body, x))
+}
+
+fn layer_of_depth(scene: &Scene, d: f64) -> Layer {
     let c = &scene.coupling;
     if d < c.discrete_layer {
         Layer::Discrete
@@ -64,6 +71,149 @@ pub fn layer(scene: &Scene, body: &Body, x: [f64; 3]) -> Layer {
         Layer::Hybrid
     } else {
         Layer::Continuum
+    }
+}
+
+/// The zone of every listed cell of the scene's grid; material in a cell not listed is
+/// discrete. Cells are numbered like nodes, on a grid of one node less per axis (cell
+/// `(i, j, k)` spans nodes `(i, j, k)` to `(i+1, j+1, k+1)`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ZoneField {
+    cells: Grid,
+    /// Sorted by cell.
+    zones: Vec<ZoneCell>,
+}
+
+impl ZoneField {
+    /// The layered zones of the scene's hybrid bodies (what the oracle publishes at start):
+    /// every cell that overlaps a hybrid body's bounding box, with the layer at its centre.
+    /// Where bodies overlap, the most discrete layer wins.
+    pub fn layered(scene: &Scene) -> Self {
+        let (grid, _) = crate::grid::scene_grid(scene);
+        let cells = cell_grid(&grid, scene.dim());
+        let c = &scene.coupling;
+        // Interface in the middle of the band: negative on the discrete side.
+        let interface = c.discrete_layer + 0.5 * c.hybrid_band;
+        let mut by_cell = std::collections::BTreeMap::<u64, f64>::new();
+        for body in scene.bodies.iter().filter(|b| b.model == Model::Hybrid) {
+            let (lo, hi) = bounds(scene, body);
+            let first = |k: usize| (((lo[k] - cells.origin[k]) / cells.h).floor() as i64).max(0);
+            let last = |k: usize| (((hi[k] - cells.origin[k]) / cells.h).floor() as i64).min(cells.nodes[k] as i64 - 1);
+            for k3 in first(2)..=last(2) {
+                for j in first(1)..=last(1) {
+                    for i in first(0)..=last(0) {
+                        let ijk = [i, j, k3];
+                        let Some(cell) = cells.index(ijk) else { continue };
+                        let mut x = cells.position(ijk);
+                        for xk in x.iter_mut().take(scene.dim()) {
+                            *xk += 0.5 * cells.h;
+                        }
+                        let d = depth(scene, body, x) - interface;
+                        by_cell.entry(cell).and_modify(|e| *e = e.min(d)).or_insert(d);
+                    }
+                }
+            }
+        }
+        let zones = by_cell
+            .into_iter()
+            .map(|(cell, distance)| ZoneCell {
+                cell,
+                zone: zone_code(layer_of_depth(scene, distance + interface)) as u32,
+                _pad: 0,
+                distance,
+            })
+            .collect();
+        ZoneField { cells, zones }
+    }
+
+    /// A field received from the oracle (cells sorted by index, as the protocol requires).
+    pub fn from_cells(scene: &Scene, zones: &[ZoneCell]) -> Result<Self, String> {
+        let (grid, _) = crate::grid::scene_grid(scene);
+        let cells = cell_grid(&grid, scene.dim());
+        let n = cells.nodes.iter().product::<u64>();
+        for (i, z) in zones.iter().enumerate() {
+            if z.cell >= n {
+                return Err(format!("zone cell {i}: cell index {} outside the grid's {n} cells", z.cell));
+            }
+            if i > 0 && zones[i - 1].cell >= z.cell {
+                return Err(format!(
+                    "zone cell {i}: cell indices must increase strictly ({} after {})",
+                    z.cell,
+                    zones[i - 1].cell
+                ));
+            }
+            if zone_of_code(z.zone).is_none() {
+                return Err(format!("zone cell {i}: zone code {} is not 0, 1 or 2", z.zone));
+            }
+        }
+        Ok(ZoneField {
+            cells,
+            zones: zones.to_vec(),
+        })
+    }
+
+    /// The cells as the oracle sends them.
+    pub fn cells(&self) -> &[ZoneCell] {
+        &self.zones
+    }
+
+    /// The layer of material at `x`: the zone of its cell; discrete outside the listed cells.
+    pub fn layer_at(&self, x: [f64; 3]) -> Layer {
+        let ijk = [0, 1, 2].map(|k| ((x[k] - self.cells.origin[k]) / self.cells.h).floor() as i64);
+        let ijk = [0, 1, 2].map(|k| if self.cells.nodes[k] == 1 { 0 } else { ijk[k] });
+        let Some(cell) = self.cells.index(ijk) else {
+            return Layer::Discrete;
+        };
+        match self.zones.binary_search_by_key(&cell, |z| z.cell) {
+            Ok(i) => zone_of_code(self.zones[i].zone).unwrap_or(Layer::Discrete),
+            Err(_) => Layer::Discrete,
+        }
+    }
+
+    /// Number of listed cells in `layer`.
+    pub fn count(&self, layer: Layer) -> usize {
+        self.zones.iter().filter(|z| zone_of_code(z.zone) == Some(layer)).count()
+    }
+}
+
+/// The cells of a node grid, as a grid of their own (one node less per used axis).
+fn cell_grid(grid: &Grid, dim: usize) -> Grid {
+    let mut cells = *grid;
+    for k in 0..dim {
+        cells.nodes[k] = (grid.nodes[k] - 1).max(1);
+    }
+    cells
+}
+
+/// Bounding box of a body.
+fn bounds(scene: &Scene, body: &Body) -> ([f64; 3], [f64; 3]) {
+    match body.shape {
+        Shape::Box { min, max } => (min, max),
+        Shape::Ball { center, radius } => {
+            let (mut lo, mut hi) = (center, center);
+            for k in 0..scene.dim() {
+                lo[k] -= radius;
+                hi[k] += radius;
+            }
+            (lo, hi)
+        }
+    }
+}
+
+fn zone_code(layer: Layer) -> Zone {
+    match layer {
+        Layer::Continuum => Zone::Continuum,
+        Layer::Hybrid => Zone::Hybrid,
+        Layer::Discrete => Zone::Discrete,
+    }
+}
+
+fn zone_of_code(code: u32) -> Option<Layer> {
+    match code {
+        c if c == Zone::Continuum as u32 => Some(Layer::Continuum),
+        c if c == Zone::Hybrid as u32 => Some(Layer::Hybrid),
+        c if c == Zone::Discrete as u32 => Some(Layer::Discrete),
+        _ => None,
     }
 }
 
@@ -120,7 +270,10 @@ hybrid_band = 0.003
 "#;
 
     fn scene() -> Scene {
-        let path = std::env::temp_dir().join(format!("grains-zones-{}.toml", std::process::id()));
+        // One file per call: the tests run in parallel threads of one process.
+        static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let path = std::env::temp_dir().join(format!("grains-zones-{}-{n}.toml", std::process::id()));
         std::fs::write(&path, SCENE).unwrap();
         let s = grains_protocol::scene::load(&path).unwrap();
         std::fs::remove_file(&path).unwrap();
@@ -147,5 +300,42 @@ hybrid_band = 0.003
         assert_eq!(layer(&s, disk, [0.078, 0.05, 0.0]), Layer::Discrete);
         assert_eq!(layer(&s, disk, [0.075, 0.05, 0.0]), Layer::Hybrid);
         assert_eq!(layer(&s, disk, [0.071, 0.05, 0.0]), Layer::Continuum);
+    }
+
+    /// The oracle's field gives every cell of a hybrid body the layer at its centre, and
+    /// material takes the zone of its cell; a field that went over the wire reads the same.
+    #[test]
+    fn layered_field_classifies_by_cell() {
+        let s = scene();
+        let f = ZoneField::layered(&s);
+        // Cell 2 mm wide from -6 mm: the cell [30, 32] x [40, 42] mm of the column has its centre
+        // 9 mm from the right face (continuum); [34, 36] 5 mm (hybrid); [38, 40] 1 mm (discrete).
+        assert_eq!(f.layer_at([0.0301, 0.041, 0.0]), Layer::Continuum);
+        assert_eq!(f.layer_at([0.0319, 0.041, 0.0]), Layer::Continuum);
+        assert_eq!(f.layer_at([0.0341, 0.041, 0.0]), Layer::Hybrid);
+        assert_eq!(f.layer_at([0.0399, 0.041, 0.0]), Layer::Discrete);
+        // Outside every hybrid body: discrete.
+        assert_eq!(f.layer_at([0.09, 0.09, 0.0]), Layer::Discrete);
+        // The signed distance is negative on the discrete side (interface at 5.5 mm depth).
+        let cell = |x: [f64; 3]| {
+            f.cells()
+                .iter()
+                .find(|z| {
+                    z.cell
+                        == f.cells
+                            .index([0, 1, 2].map(|k| if k == 2 { 0 } else { ((x[k] + 0.006) / 0.002).floor() as i64 }))
+                            .unwrap()
+                })
+                .copied()
+                .unwrap()
+        };
+        assert!((cell([0.0391, 0.041, 0.0]).distance - (0.001 - 0.0055)).abs() < 1e-12);
+        assert!((cell([0.0301, 0.041, 0.0]).distance - (0.009 - 0.0055)).abs() < 1e-12);
+        // Every layer is present and the round trip keeps the field.
+        assert!(f.count(Layer::Discrete) > 0 && f.count(Layer::Hybrid) > 0 && f.count(Layer::Continuum) > 0);
+        assert_eq!(ZoneField::from_cells(&s, f.cells()).unwrap(), f);
+        let mut bad = f.cells().to_vec();
+        bad.swap(0, 1);
+        assert!(ZoneField::from_cells(&s, &bad).unwrap_err().contains("increase strictly"));
     }
 }

@@ -30,11 +30,13 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     let mut step_pub = session.publisher::<StepBegin, StepHeader>(&names::STEP_BEGIN, 1)?;
     let mut vel_pub = session.publisher::<NodeVelocity, StepHeader>(&names::VELOCITIES, 1024)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
-    session.wait_until("the DEM, the MPM and the launcher", |_| {
+    // The solvers, and the oracle when the run has one, follow the steps.
+    let step_subscribers = 2 + usize::from(scene.participants().contains(&Role::Oracle));
+    session.wait_until("the DEM, the MPM, the oracle and the launcher", |_| {
         control.publisher_count() >= 1
             && dem_sub.publisher_count() >= 1
             && mpm_sub.publisher_count() >= 1
-            && step_pub.subscriber_count() >= 2
+            && step_pub.subscriber_count() >= step_subscribers
             && vel_pub.subscriber_count() >= 2
             && summary_pub.subscriber_count() >= 1
     })?;

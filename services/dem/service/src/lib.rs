@@ -28,8 +28,8 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneError> {
 /// Runs the DEM participant of `scene` over `transport` to the end of the run.
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     if let Some(params) = &scene.synthetic {
-        let mut synthetic = SyntheticSolver::new(Role::Dem, scene.seed, scene.dim(), params.clone());
-        return participant::run(transport, Role::Dem, scene, opts, &mut synthetic);
+        let synthetic = SyntheticSolver::new(Role::Dem, scene.seed, scene.dim(), params.clone());
+        return participant::run(transport, Role::Dem, scene, opts, |_| Ok(synthetic));
     }
     check_scene(scene)?;
     match scene.dimension {
@@ -39,7 +39,8 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 }
 
 fn run_physics<T: Transport, S: Space>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
-    let state = setup::build_state::<S>(scene)?;
-    let mut solver = solver::DemSolver::new(scene, state, opts.out_dir.as_deref())?;
-    participant::run(transport, Role::Dem, scene, opts, &mut solver)
+    participant::run(transport, Role::Dem, scene, opts, |zones| {
+        let state = setup::build_state::<S>(scene, zones)?;
+        solver::DemSolver::new(scene, state, opts.out_dir.as_deref())
+    })
 }

@@ -6,7 +6,7 @@ use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
 use grains_protocol::scene::{DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
-use grains_service::zones::{self, Layer};
+use grains_service::zones::{Layer, ZoneField};
 
 /// DEM step length of a scene: the macro-step over the substeps.
 pub fn dem_dt(scene: &Scene) -> f64 {
@@ -65,8 +65,9 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
 }
 
 /// Builds the DEM state of a scene: grains of every `dem` body on a jittered lattice (a
-/// loose packing that gravity settles), walls, domain. Deterministic from the scene's seed.
-pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
+/// loose packing that gravity settles), walls, domain; in `hybrid` bodies only the grains of
+/// the discrete and hybrid cells of `zones`. Deterministic from the scene's seed.
+pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result<DemState<S>> {
     let dim = scene.dim();
     let mut materials = Vec::new();
     let mut material_index = vec![u32::MAX; scene.materials.len()];
@@ -152,7 +153,7 @@ pub fn build_state<S: Space>(scene: &Scene) -> anyhow::Result<DemState<S>> {
             // Hybrid bodies: grains in the discrete layer and the hybrid band only, the band's
             // with mass and springs scaled by 1 − w.
             let scale = match body.model {
-                Model::Hybrid => match zones::layer(scene, body, S::to_array(x)) {
+                Model::Hybrid => match zones.layer_at(S::to_array(x)) {
                     Layer::Continuum => continue,
                     Layer::Hybrid => 1.0 - scene.coupling.weight,
                     Layer::Discrete => 1.0,

@@ -12,7 +12,12 @@ fn scene() -> scene::Scene {
 }
 
 fn solver(s: &scene::Scene) -> DemSolver<D2> {
-    DemSolver::new(s, setup::build_state::<D2>(s).unwrap(), None).unwrap()
+    DemSolver::new(
+        s,
+        setup::build_state::<D2>(s, &grains_service::zones::ZoneField::layered(s)).unwrap(),
+        None,
+    )
+    .unwrap()
 }
 
 /// Without hybrid grains a coupled step is the step alone, bit for bit: nothing is rasterized

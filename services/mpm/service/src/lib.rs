@@ -27,8 +27,8 @@ pub fn check_scene(scene: &Scene) -> Result<(), SceneError> {
 /// Runs the MPM participant of `scene` over `transport` to the end of the run.
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     if let Some(params) = &scene.synthetic {
-        let mut synthetic = SyntheticSolver::new(Role::Mpm, scene.seed, scene.dim(), params.clone());
-        return participant::run(transport, Role::Mpm, scene, opts, &mut synthetic);
+        let synthetic = SyntheticSolver::new(Role::Mpm, scene.seed, scene.dim(), params.clone());
+        return participant::run(transport, Role::Mpm, scene, opts, |_| Ok(synthetic));
     }
     check_scene(scene)?;
     match scene.dimension {
@@ -38,7 +38,8 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 }
 
 fn run_physics<T: Transport, S: MpmSpace>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
-    let (points, params) = setup::build::<S>(scene).map_err(anyhow::Error::msg)?;
-    let mut solver = solver::MpmSolver::new(scene, points, params, opts.out_dir.as_deref())?;
-    participant::run(transport, Role::Mpm, scene, opts, &mut solver)
+    participant::run(transport, Role::Mpm, scene, opts, |zones| {
+        let (points, params) = setup::build::<S>(scene, zones).map_err(anyhow::Error::msg)?;
+        solver::MpmSolver::new(scene, points, params, opts.out_dir.as_deref())
+    })
 }

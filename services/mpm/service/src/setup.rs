@@ -9,7 +9,7 @@ use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
 use grains_protocol::scene::{Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
-use grains_service::zones::{self, Layer};
+use grains_service::zones::{Layer, ZoneField};
 
 /// The one MPM material of a scene (one per scene in this version) and its index.
 fn mpm_material(scene: &Scene) -> Result<(usize, &Material), String> {
@@ -111,8 +111,9 @@ fn vec<S: Space>(a: [f64; 3]) -> S::V {
     S::from_array(a)
 }
 
-/// Points of every mpm body and the step parameters of a scene.
-pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), String> {
+/// Points of every mpm body (of `hybrid` bodies, those in the hybrid and continuum cells of
+/// `zones`) and the step parameters of a scene.
+pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>, MpmParams<S>), String> {
     let dim = scene.dim();
     let (material_index, material) = mpm_material(scene)?;
     let h = scene.domain.cell_size;
@@ -133,7 +134,7 @@ pub fn build<S: MpmSpace>(scene: &Scene) -> Result<(Points<S>, MpmParams<S>), St
         for x in seed::<S>(region, grid.origin, h, per_axis) {
             // Hybrid bodies: points in the hybrid band (weight w) and below it only.
             let weight = match body.model {
-                BodyModel::Hybrid => match zones::layer(scene, body, S::to_array(x)) {
+                BodyModel::Hybrid => match zones.layer_at(S::to_array(x)) {
                     Layer::Discrete => continue,
                     Layer::Hybrid => scene.coupling.weight,
                     Layer::Continuum => 1.0,
