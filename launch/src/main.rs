@@ -39,6 +39,8 @@ enum Cmd {
     Pack(grains_launch::pack::PackArgs),
     /// Check a scene file and print what a run of it would start.
     Check { scene: PathBuf },
+    /// Validation against reference results: report, picture, non-zero exit on a failed check.
+    Validate(grains_launch::validate::ValidateArgs),
     /// Benchmarks that print tables (ipc: transport cost per macro-step).
     Bench {
         #[command(subcommand)]
@@ -116,6 +118,7 @@ fn main() -> ExitCode {
             );
             Ok(0)
         }),
+        Cmd::Validate(args) => grains_launch::validate::validate(&args).map(|ok| if ok { 0 } else { 1 }),
         Cmd::Bench { what: BenchCmd::Ipc(args) } => grains_launch::bench::ipc(&args).map(|()| 0),
         Cmd::Bench { what: BenchCmd::Dem(args) } => grains_launch::bench_dem::dem(&args).map(|()| 0),
         Cmd::Bench {

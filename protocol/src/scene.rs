@@ -234,6 +234,22 @@ pub struct Coupling {
     /// ... then a band of this thickness [m] where grains and points overlap and are coupled;
     /// points only below it.
     pub hybrid_band: f64,
+    /// How a hybrid grain takes the constrained velocities back.
+    pub grain_transfer: GrainTransfer,
+}
+
+/// How a hybrid grain takes the coupler's node velocities back (Yue 2018 Alg. 5–6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GrainTransfer {
+    /// Alg. 5–6 as written (the default): the grain's velocity becomes the interpolated node
+    /// velocity (spin: half the curl) and it moves from its saved position with it. The band's
+    /// grains move affinely with the grid: they stay put at rest, but cannot rearrange, and
+    /// the band holds faces a granular material would not.
+    Pic,
+    /// The grain keeps its substepped velocity and position and adds the coupling's change of
+    /// the node velocities interpolated to it (times dt / 2 for the position): grains of the
+    /// band can rearrange, but nothing keeps them from drifting into the continuum at rest.
+    Flip,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -937,11 +953,11 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         let shape = shape(ctx, dim, &b.shape, &b.min, &b.max, &b.center, &b.radius, &f)?;
         let packing = match &b.packing {
             None => None,
-            Some(p) if model != Model::Dem => {
+            Some(p) if model == Model::Mpm => {
                 return Err(ctx.err(
                     Some(p.span()),
                     Some(&f("packing")),
-                    "a packing file makes grains: only a model = \"dem\" body can have one".into(),
+                    "a packing file makes grains: only a model = \"dem\" or \"hybrid\" body can have one".into(),
                 ));
             }
             Some(p) => {
@@ -1070,6 +1086,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             weight: 0.5,
             discrete_layer: band_default,
             hybrid_band: band_default,
+            grain_transfer: GrainTransfer::Pic,
         },
         Some(c) => Coupling {
             substeps: match &c.substeps {
@@ -1094,6 +1111,17 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             hybrid_band: match &c.hybrid_band {
                 None => band_default,
                 Some(t) => in_range(ctx, t, "coupling.hybrid_band", Open(0.0), Bound::None)?,
+            },
+            grain_transfer: match c.grain_transfer.as_ref().map(|t| (t, t.get_ref().as_str())) {
+                None | Some((_, "pic")) => GrainTransfer::Pic,
+                Some((_, "flip")) => GrainTransfer::Flip,
+                Some((t, other)) => {
+                    return Err(ctx.err(
+                        Some(t.span()),
+                        Some("coupling.grain_transfer"),
+                        format!("must be \"flip\" or \"pic\", got {other:?}"),
+                    ));
+                }
             },
         },
     };
@@ -1438,6 +1466,7 @@ pub mod raw {
         pub weight: Option<Spanned<f64>>,
         pub discrete_layer: Option<Spanned<f64>>,
         pub hybrid_band: Option<Spanned<f64>>,
+        pub grain_transfer: Option<Spanned<String>>,
     }
 
     #[derive(Deserialize)]

@@ -102,6 +102,16 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
     let mut rng = Rng::new(scene.seed);
     let mut next_id = 0u64;
     let mut from_packing = Vec::new();
+    // Hybrid bodies: grains in the discrete and hybrid cells only, the hybrid ones with mass and
+    // springs scaled by 1 − w; `None` for a grain in a continuum cell.
+    let zone_scale = |body: &grains_protocol::scene::Body, x: S::V| match body.model {
+        Model::Hybrid => match zones.layer_at(S::to_array(x)) {
+            Layer::Continuum => None,
+            Layer::Hybrid => Some(1.0 - scene.coupling.weight),
+            Layer::Discrete => Some(1.0),
+        },
+        Model::Dem | Model::Mpm => Some(1.0),
+    };
     for body in scene.bodies.iter().filter(|b| matches!(b.model, Model::Dem | Model::Hybrid)) {
         let mat = &scene.materials[body.material];
         let Some(dem) = &mat.dem else { continue };
@@ -128,18 +138,20 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
                     Shape::Box { min, max } => (0..dim).all(|k| a.x[k] >= min[k] && a.x[k] <= max[k]),
                     Shape::Ball { center, radius } => (x - S::from_array(center)).length() <= radius,
                 };
-                if inside {
-                    from_packing.push(true);
-                    let r = 0.5 * a.diameter;
-                    let i = state
-                        .grains
-                        .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
-                    state.grains.frozen[i] = a.kind == 2 || body.frozen;
-                    if !state.grains.frozen[i] {
-                        state.grains.v[i] = S::from_array(body.velocity);
-                    }
-                    next_id += 1;
+                let Some(scale) = inside.then(|| zone_scale(body, x)).flatten() else {
+                    continue;
+                };
+                from_packing.push(true);
+                let r = 0.5 * a.diameter;
+                let i = state
+                    .grains
+                    .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
+                state.grains.frozen[i] = a.kind == 2 || body.frozen;
+                state.grains.scale[i] = scale;
+                if !state.grains.frozen[i] {
+                    state.grains.v[i] = S::from_array(body.velocity);
                 }
+                next_id += 1;
             }
             continue;
         }
@@ -150,16 +162,7 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
                 continue;
             }
             let r = radius(&mut rng, dem.radius, dem.radius_std);
-            // Hybrid bodies: grains in the discrete layer and the hybrid band only, the band's
-            // with mass and springs scaled by 1 − w.
-            let scale = match body.model {
-                Model::Hybrid => match zones.layer_at(S::to_array(x)) {
-                    Layer::Continuum => continue,
-                    Layer::Hybrid => 1.0 - scene.coupling.weight,
-                    Layer::Discrete => 1.0,
-                },
-                Model::Dem | Model::Mpm => 1.0,
-            };
+            let Some(scale) = zone_scale(body, x) else { continue };
             from_packing.push(false);
             let i = state
                 .grains

@@ -7,7 +7,7 @@ use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemState, WallShape};
 use grains_grid::{Grid, Kernel};
-use grains_protocol::scene::Scene;
+use grains_protocol::scene::{GrainTransfer, Scene};
 use grains_protocol::wire::{NodeVelocity, RasterNode};
 use grains_service::solver::{Solver, SolverReport, StepWindow};
 use std::collections::HashMap;
@@ -16,6 +16,7 @@ pub struct DemSolver<S: Space> {
     pub state: DemState<S>,
     pub pipeline: DemPipeline<S>,
     substeps: u32,
+    grain_transfer: GrainTransfer,
     frames: Option<(FrameWriter, u64)>,
     /// `walls.csv`: per macro-step, the force of the grains on every wall and where the wall
     /// is (force–displacement curves of plates, penetrometers, drums).
@@ -57,6 +58,7 @@ impl<S: Space> DemSolver<S> {
             state,
             pipeline,
             substeps: scene.coupling.substeps,
+            grain_transfer: scene.coupling.grain_transfer,
             frames: frames.map(|f| (f, scene.output.frames_every)),
             walls_log,
             energy_bound,
@@ -150,22 +152,36 @@ impl<S: Space> Solver for DemSolver<S> {
         }
     }
 
-    /// Alg. 5 and 6: every hybrid grain takes the velocity interpolated from the coupler's
-    /// node velocities (its own raster's elsewhere) and the spin of that field, and moves from
-    /// its saved position with that velocity;
-    /// the other grains keep their substepped state.
+    /// Alg. 5 and 6. With `grain_transfer = "flip"` every hybrid grain adds to its substepped
+    /// velocity the coupling's change of the node velocities (constrained minus its own
+    /// raster's, zero on nodes the coupler left alone) interpolated at its saved position, and
+    /// moves by that change times dt / 2. With `"pic"` (Alg. 5–6 as written) it takes the velocity
+    /// interpolated from the coupler's node velocities (its own raster's elsewhere) and the spin
+    /// of that field, and moves from its saved position with that velocity. The other grains
+    /// keep their substepped state.
     fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()> {
         if !self.hybrid.is_empty() {
             let constrained: HashMap<u64, S::V> = velocities.iter().map(|v| (v.node, S::from_array(v.velocity))).collect();
             let own: HashMap<u64, S::V> = self.raster.iter().map(|r| (r.node, r.momentum * (1.0 / r.mass))).collect();
             let node_velocity = |n: u64| constrained.get(&n).or_else(|| own.get(&n)).copied();
             let g = &mut self.state.grains;
+            let flip = self.grain_transfer == GrainTransfer::Flip;
+            // The coupling's change of each node velocity (zero where the coupler did not act).
+            let change = |n: u64| Some(constrained.get(&n).zip(own.get(&n)).map_or(S::V::default(), |(c, o)| *c - *o));
             for i in 0..g.len() {
                 if let Some(&x0) = self.hybrid.get(&g.id[i]) {
-                    let (v, spin) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
-                    g.v[i] = v;
-                    g.omega[i] = spin;
-                    g.x[i] = x0 + v * window.dt;
+                    if flip {
+                        // The coupling force, spread evenly over the step, changes the velocity
+                        // by dv and the position by dv dt / 2.
+                        let (dv, _) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, change);
+                        g.v[i] += dv;
+                        g.x[i] += dv * (0.5 * window.dt);
+                    } else {
+                        let (v, spin) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
+                        g.v[i] = v;
+                        g.omega[i] = spin;
+                        g.x[i] = x0 + v * window.dt;
+                    }
                 }
             }
             self.pipeline.invalidate();
