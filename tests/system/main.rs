@@ -422,7 +422,13 @@ struct Exchange {
 
 impl Hybrid {
     fn load(scene: &str) -> Hybrid {
-        let s = grains_protocol::scene::load(&repo().join(scene)).unwrap();
+        Hybrid::load_with(scene, |_| {})
+    }
+
+    /// The scene changed by `edit` before the solvers are built.
+    fn load_with(scene: &str, edit: impl FnOnce(&mut grains_protocol::scene::Scene)) -> Hybrid {
+        let mut s = grains_protocol::scene::load(&repo().join(scene)).unwrap();
+        edit(&mut s);
         // The oracle's field, as the participants receive it.
         let zones = grains_service::zones::ZoneField::layered(&s);
         let dem =
@@ -507,6 +513,40 @@ fn the_coupling_step_conserves_momentum_between_the_real_solvers() {
         h.finish(step, &x);
     }
     assert!(shared_total > 20 * 10, "the band must couple nodes every step ({shared_total})");
+}
+
+/// With `grain_transfer = "flip"` the grains take exactly the momentum the coupler gave the
+/// DEM: their summed momentum changes in `finish` by Σ (m_d v − p_d) over the shared nodes, to
+/// round-off (the MPM's weights sum to one at every grain, so rasterizing the masses and
+/// interpolating the velocity changes are adjoint).
+#[test]
+fn flip_grains_take_exactly_the_coupling_momentum() {
+    use grains_service::solver::Solver;
+    let mut h = Hybrid::load_with("tests/scenes/hybrid_small_2d.toml", |s| {
+        s.coupling.grain_transfer = grains_protocol::scene::GrainTransfer::Flip;
+    });
+    for step in 1..=20 {
+        let x = h.exchange(step);
+        let before = h.dem.report().momentum;
+        let mut given = [0.0; 3];
+        for v in &x.velocities {
+            let d = x.dem.iter().find(|n| n.node == v.node).unwrap();
+            for c in 0..3 {
+                given[c] += d.mass * v.velocity[c] - d.momentum[c];
+            }
+        }
+        h.finish(step, &x);
+        let after = h.dem.report().momentum;
+        let scale: f64 = x.dem.iter().map(|n| n.momentum.iter().map(|p| p.abs()).sum::<f64>()).sum();
+        for c in 0..3 {
+            assert!(
+                (after[c] - before[c] - given[c]).abs() <= 1e-12 * scale,
+                "step {step}, component {c}: the grains gained {} kg m/s, the coupler gave {}",
+                after[c] - before[c],
+                given[c]
+            );
+        }
+    }
 }
 
 /// A hybrid block translating without gravity keeps its shape (issue 5): over 0.5 s every grain
