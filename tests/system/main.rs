@@ -531,8 +531,8 @@ fn flip_grains_take_exactly_the_coupling_momentum() {
         let mut given = [0.0; 3];
         for v in &x.velocities {
             let d = x.dem.iter().find(|n| n.node == v.node).unwrap();
-            for c in 0..3 {
-                given[c] += d.mass * v.velocity[c] - d.momentum[c];
+            for (c, g) in given.iter_mut().enumerate() {
+                *g += d.mass * v.velocity[c] - d.momentum[c];
             }
         }
         h.finish(step, &x);
