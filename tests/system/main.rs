@@ -737,3 +737,38 @@ fn validate_quick_hybrid_runout_is_within_10_percent_of_dem() {
     assert!(std::fs::read_to_string(out.join("profiles.svg")).unwrap().contains("<polyline"));
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// SIGKILL of the oracle mid-run of a hybrid scene: the launcher names it and exits 1 within
+/// 2 s, as for the other participants, and leaves no file of the run.
+#[test]
+fn killing_the_oracle_ends_a_hybrid_run_within_2_s() {
+    let _machine = machine();
+    let out = out_dir("kill-oracle");
+    let mut launcher = Running::grains(&[
+        "run",
+        "tests/scenes/hybrid_small_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "run.steps=1000000",
+    ]);
+    let err = launcher.wait_for("started as processes", Duration::from_secs(60));
+    let (run_id, dir) = (run_id(&err), run_dir(&err));
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
+        assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pid = pid_of(&err, "grains-oracle");
+    let killed = Instant::now();
+    // SAFETY: kill(2) on a child of our child, by pid.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(30));
+    let (took, err) = (killed.elapsed(), launcher.stderr());
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert!(took < Duration::from_secs(2), "the launcher took {took:?}: {err}");
+    assert!(err.lines().any(|l| l.contains("error") && l.contains("grains-oracle")), "{err}");
+    let left = grains_transport::ipc::run_files(&run_id);
+    assert!(left.is_empty(), "files of run {run_id} left: {left:?}");
+    std::fs::remove_dir_all(&out).unwrap();
+}
