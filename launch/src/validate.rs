@@ -31,6 +31,54 @@ fn load_with(path: &Path, overrides: &[String]) -> anyhow::Result<grains_protoco
     Ok(grains_protocol::scene::load_with_overrides(path, overrides)?.0)
 }
 
+/// One run of `scene` with `overrides` as processes, quietly, under `<out>/runs`.
+fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyhow::Result<crate::run::RunOutcome> {
+    run(&RunOptions {
+        scene_path: scene.to_path_buf(),
+        transport: TransportKind::Ipc,
+        external: Vec::new(),
+        out_root: args.out.join("runs"),
+        progress: false,
+        overrides,
+        announce: false,
+    })
+}
+
+/// The rows of a run's `metrics.csv` (empty when it has none).
+struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<f64>>,
+}
+
+impl Table {
+    fn read(run_dir: &Path) -> Table {
+        let csv = std::fs::read_to_string(run_dir.join("metrics.csv")).unwrap_or_default();
+        let mut lines = csv.lines();
+        let header = lines.next().unwrap_or_default().split(',').map(String::from).collect();
+        let rows = lines
+            .map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect())
+            .collect();
+        Table { header, rows }
+    }
+
+    /// Column `name` of `row` (0 when the column is missing).
+    fn get(&self, row: &[f64], name: &str) -> f64 {
+        self.header
+            .iter()
+            .position(|c| c == name)
+            .and_then(|i| row.get(i).copied())
+            .unwrap_or(0.0)
+    }
+
+    fn first(&self, name: &str) -> f64 {
+        self.rows.first().map_or(f64::NAN, |r| self.get(r, name))
+    }
+
+    fn last(&self, name: &str) -> f64 {
+        self.rows.last().map_or(f64::NAN, |r| self.get(r, name))
+    }
+}
+
 #[derive(Debug, Clone, clap::Args)]
 pub struct ValidateArgs {
     /// The CI subset: aspect ratio 1 only.
@@ -214,34 +262,17 @@ fn sweep(args: &ValidateArgs, packing: &Path, ks: &[u32]) -> anyhow::Result<Vec<
             "output.frames_every=0".to_string(),
         ];
         overrides.extend(args.hybrid_overrides.iter().cloned());
-        let outcome = run(&RunOptions {
-            scene_path: args.scenes.join("column_collapse_hybrid_2d.toml"),
-            transport: TransportKind::Ipc,
-            external: Vec::new(),
-            out_root: args.out.join("runs"),
-            progress: false,
-            overrides,
-            announce: false,
-        })?;
-        let csv = std::fs::read_to_string(outcome.dir.join("metrics.csv")).unwrap_or_default();
-        let header: Vec<&str> = csv.lines().next().unwrap_or_default().split(',').collect();
-        let col = |name: &str| header.iter().position(|c| *c == name);
-        let rows_: Vec<Vec<f64>> = csv
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect())
-            .collect();
-        let value = |row: &Vec<f64>, name: &str| col(name).and_then(|i| row.get(i).copied()).unwrap_or(0.0);
-        let mass = rows_.first().map_or(0.0, |r| value(r, "dem_mass") + value(r, "mpm_mass"));
-        let e_pot = mass * 9.81 * 0.5 * a * L0;
-        let ke_max = rows_.iter().map(|r| value(r, "dem_ke") + value(r, "mpm_ke")).fold(0.0, f64::max);
+        let outcome = run_scene(args, &args.scenes.join("column_collapse_hybrid_2d.toml"), overrides)?;
+        let t = Table::read(&outcome.dir);
+        let e_pot = (t.first("dem_mass") + t.first("mpm_mass")) * 9.81 * 0.5 * a * L0;
+        let ke_max = t.rows.iter().map(|r| t.get(r, "dem_ke") + t.get(r, "mpm_ke")).fold(0.0, f64::max);
         let energy_ratio = if e_pot > 0.0 { ke_max / e_pot } else { f64::NAN };
         let completed = outcome.status == Status::Completed;
         rows.push(SweepRow {
             k,
             stable: completed && energy_ratio <= 1.0,
             energy_ratio,
-            wall: rows_.last().map_or(f64::NAN, |r| value(r, "wall_s")),
+            wall: t.last("wall_s"),
             message: if completed { String::new() } else { outcome.message.clone() },
         });
     }
@@ -260,19 +291,12 @@ struct PileDrift {
 fn pile_drift(args: &ValidateArgs, transfer: &'static str) -> anyhow::Result<PileDrift> {
     let s = load_with(&args.pile, &[])?;
     let (settled, end) = ((0.3 / s.dt).round() as u64, (0.8 / s.dt).round() as u64);
-    let outcome = run(&RunOptions {
-        scene_path: args.pile.clone(),
-        transport: TransportKind::Ipc,
-        external: Vec::new(),
-        out_root: args.out.join("runs"),
-        progress: false,
-        overrides: vec![
-            format!("coupling.grain_transfer={transfer:?}"),
-            "run.duration=0.8".into(),
-            format!("output.frames_every={}", gcd(settled, end)),
-        ],
-        announce: false,
-    })?;
+    let overrides = vec![
+        format!("coupling.grain_transfer={transfer:?}"),
+        "run.duration=0.8".into(),
+        format!("output.frames_every={}", gcd(settled, end)),
+    ];
+    let outcome = run_scene(args, &args.pile, overrides)?;
     if outcome.status != Status::Completed {
         bail!("{}: the run did not complete: {}", args.pile.display(), outcome.message);
     }
@@ -291,20 +315,11 @@ fn pile_drift(args: &ValidateArgs, transfer: &'static str) -> anyhow::Result<Pil
         .filter(|(b, _)| **b > 0.0)
         .map(|(b, a)| (a - b).abs())
         .fold(0.0, f64::max);
-    let csv = std::fs::read_to_string(outcome.dir.join("metrics.csv"))?;
-    let header: Vec<&str> = csv.lines().next().unwrap_or_default().split(',').collect();
-    let last: Vec<&str> = csv.lines().last().unwrap_or_default().split(',').collect();
-    let ke = |name: &str| {
-        header
-            .iter()
-            .position(|c| *c == name)
-            .and_then(|i| last.get(i)?.parse::<f64>().ok())
-            .unwrap_or(0.0)
-    };
+    let t = Table::read(&outcome.dir);
     Ok(PileDrift {
         transfer,
         drift,
-        ke_end: ke("dem_ke") + ke("mpm_ke"),
+        ke_end: t.last("dem_ke") + t.last("mpm_ke"),
     })
 }
 
@@ -333,27 +348,15 @@ fn run_case(args: &ValidateArgs, scene: &str, packing: &Path, a: f64, extra: &[S
     // One frame at the start and one at the last step, whatever the overrides make of it.
     let steps = load_with(&path, &overrides)?.steps;
     overrides.push(format!("output.frames_every={steps}"));
-    let outcome = run(&RunOptions {
-        scene_path: path,
-        transport: TransportKind::Ipc,
-        external: Vec::new(),
-        out_root: args.out.join("runs"),
-        progress: false,
-        overrides,
-        announce: false,
-    })?;
+    let outcome = run_scene(args, &path, overrides)?;
     if outcome.status != Status::Completed {
         bail!("{scene}: the run did not complete: {}", outcome.message);
     }
-    let csv = std::fs::read_to_string(outcome.dir.join("metrics.csv"))?;
-    let header: Vec<&str> = csv.lines().next().unwrap_or_default().split(',').collect();
-    let first: Vec<&str> = csv.lines().nth(1).unwrap_or_default().split(',').collect();
-    let last: Vec<&str> = csv.lines().last().unwrap_or_default().split(',').collect();
-    let get = |row: &[&str], name: &str| header.iter().position(|c| *c == name).and_then(|i| row.get(i)?.parse::<f64>().ok());
+    let t = Table::read(&outcome.dir);
     Ok(RunResult {
-        grains: get(&first, "dem_items").unwrap_or(0.0) as u64,
-        points: get(&first, "mpm_items").unwrap_or(0.0) as u64,
-        wall: get(&last, "wall_s").unwrap_or(f64::NAN),
+        grains: t.first("dem_items") as u64,
+        points: t.first("mpm_items") as u64,
+        wall: t.last("wall_s"),
         dir: outcome.dir,
     })
 }

@@ -89,15 +89,7 @@ pub fn run<T: Transport, S: Solver>(
     opts: &ParticipantOptions,
     make: impl FnOnce(&ZoneField) -> anyhow::Result<S>,
 ) -> anyhow::Result<()> {
-    let mut session = Session::join(
-        transport,
-        role,
-        &opts.run_id,
-        scene.hash,
-        opts.stop.clone(),
-        opts.connect_timeout,
-        opts.protocol_version,
-    )?;
+    let mut session = join(transport, role, scene, opts)?;
     if scene.time_owner() == role {
         let mut solver = make(&ZoneField::layered(scene))?;
         return run_alone(&mut session, scene, &mut solver);
@@ -131,17 +123,8 @@ pub fn run<T: Transport, S: Solver>(
 
     loop {
         let wait_start = Instant::now();
-        let begin = session.recv(&mut step_sub, "the next step", |h, b| (*h, b.first().copied()))?;
-        let (h, b) = (begin.0, begin.1.unwrap_or_default());
-        session.check_message::<StepBegin>(&names::STEP_BEGIN, &h, h.step, &[])?;
-        if b.flags & STEP_STOP != 0 {
+        let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
-        }
-        let window = StepWindow {
-            step: h.step,
-            time: h.time,
-            dt: h.dt,
-            substeps: b.substeps,
         };
         let mut wait = wait_start.elapsed();
         let compute_start = Instant::now();
@@ -175,6 +158,34 @@ pub fn run<T: Transport, S: Solver>(
         report.checksum = sent_checksum;
         publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
     }
+}
+
+/// Joins the run of `scene` as `role` (admission by the launcher).
+pub fn join<'t, T: Transport>(transport: &'t T, role: Role, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<Session<'t, T>> {
+    Session::join(
+        transport,
+        role,
+        &opts.run_id,
+        scene.hash,
+        opts.stop.clone(),
+        opts.connect_timeout,
+        opts.protocol_version,
+    )
+}
+
+/// Waits for the time owner's next step begin (checked); `None` when it says stop.
+pub fn next_step<T: Transport>(
+    session: &Session<'_, T>,
+    step_sub: &mut T::Subscriber<StepBegin, StepHeader>,
+) -> anyhow::Result<Option<StepWindow>> {
+    let (h, b) = session.recv(step_sub, "the next step", |h, b| (*h, b.first().copied().unwrap_or_default()))?;
+    session.check_message::<StepBegin>(&names::STEP_BEGIN, &h, h.step, &[])?;
+    Ok((b.flags & STEP_STOP == 0).then_some(StepWindow {
+        step: h.step,
+        time: h.time,
+        dt: h.dt,
+        substeps: b.substeps,
+    }))
 }
 
 /// A solver that owns time: it steps by itself and obeys control commands between steps.

@@ -9,21 +9,12 @@ use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
-use grains_service::session::Session;
-use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, publish_summary};
+use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::time::Instant;
 
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
-    let mut session = Session::join(
-        transport,
-        Role::Coupler,
-        &opts.run_id,
-        scene.hash,
-        opts.stop.clone(),
-        opts.connect_timeout,
-        opts.protocol_version,
-    )?;
+    let mut session = join(transport, Role::Coupler, scene, opts)?;
     let mut control = session.subscriber::<Control, StepHeader>(&names::CONTROL)?;
     let mut dem_sub = session.subscriber::<RasterNode, StepHeader>(&names::DEM_RASTER)?;
     let mut mpm_sub = session.subscriber::<RasterNode, StepHeader>(&names::MPM_RASTER)?;

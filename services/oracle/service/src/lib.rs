@@ -11,10 +11,9 @@
 use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::scene::{OracleKind, Scene};
-use grains_protocol::wire::{STEP_STOP, StepBegin, StepHeader, Summary, ZoneCell};
+use grains_protocol::wire::{StepBegin, StepHeader, Summary, ZoneCell};
 use grains_protocol::{Role, checksum::checksum_bytes};
-use grains_service::session::Session;
-use grains_service::solver::{ParticipantOptions, SolverReport, StepWindow, publish_summary};
+use grains_service::solver::{ParticipantOptions, SolverReport, join, next_step, publish_summary};
 use grains_service::zones::{Layer, ZoneField};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::time::{Duration, Instant};
@@ -45,15 +44,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     let t = Instant::now();
     let field = ZoneField::layered(scene);
     let field_time = t.elapsed();
-    let mut session = Session::join(
-        transport,
-        Role::Oracle,
-        &opts.run_id,
-        scene.hash,
-        opts.stop.clone(),
-        opts.connect_timeout,
-        opts.protocol_version,
-    )?;
+    let mut session = join(transport, Role::Oracle, scene, opts)?;
     let cells = field.cells();
     let mut zones_pub = session.publisher::<ZoneCell, StepHeader>(&names::ZONES, cells.len().max(1))?;
     let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
@@ -81,16 +72,8 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     let mut compute = field_time;
     loop {
         let wait_start = Instant::now();
-        let (h, b) = session.recv(&mut step_sub, "the next step", |h, b| (*h, b.first().copied().unwrap_or_default()))?;
-        session.check_message::<StepBegin>(&names::STEP_BEGIN, &h, h.step, &[])?;
-        if b.flags & STEP_STOP != 0 {
+        let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
-        }
-        let window = StepWindow {
-            step: h.step,
-            time: h.time,
-            dt: h.dt,
-            substeps: b.substeps,
         };
         publish_summary(&session, &mut summary_pub, &window, &report, compute, wait_start.elapsed())?;
         compute = Duration::ZERO;
