@@ -78,6 +78,7 @@ fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64) -> anyhow::Resul
     for _ in 0..args.repeats {
         for (k, transport) in [TransportKind::Inproc, TransportKind::Ipc].into_iter().enumerate() {
             let opts = RunOptions {
+                bridge: None,
                 scene_path: scene.clone(),
                 transport,
                 external: vec![],

@@ -62,6 +62,7 @@ fn one(args: &HybridArgs, scene: &str, transport: TransportKind, extra: &[String
     ];
     overrides.extend(extra.iter().cloned());
     let outcome = run(&RunOptions {
+        bridge: None,
         scene_path: args.scenes.join(scene),
         transport,
         external: Vec::new(),

@@ -1,11 +1,13 @@
 //! The `grains` command as a library: [`run`] (one run from scene to outputs, over processes
 //! or threads), [`participants`] (children and threads behind one trait), [`outputs`]
-//! (metrics and summary, atomic), [`bench`] (transport benchmarks).
+//! (metrics and summary, atomic), [`bridge`] (the optional zenoh bridge of a run), [`bench`]
+//! (transport benchmarks).
 
 pub mod bench;
 pub mod bench_dem;
 pub mod bench_hybrid;
 pub mod bench_mpm;
+pub mod bridge;
 pub mod outputs;
 pub mod pack;
 pub mod participants;

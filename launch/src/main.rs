@@ -34,6 +34,39 @@ enum Cmd {
         /// `--set body.0.max=[0.04,0.08]` (repeatable; values in TOML syntax).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
+        /// Open the run to remote clients over zenoh (grains monitor, grains steer; see README).
+        #[arg(long)]
+        bridge: bool,
+        #[command(flatten)]
+        bridge_args: grains_bridge::config::BridgeArgs,
+    },
+    /// Live table of a run's summaries, from its bridge (here or on another machine).
+    Monitor {
+        /// Run id (see `grains runs`).
+        #[arg(long)]
+        run: String,
+        /// Stop after this many rows.
+        #[arg(long)]
+        rows: Option<u64>,
+        #[command(flatten)]
+        remote: Remote,
+    },
+    /// Send a command to a run through its bridge: pause, resume, stop, snapshot, or
+    /// `set KEY VALUE`; prints the step at which it took effect, or why it was refused.
+    Steer {
+        /// Run id (see `grains runs`).
+        #[arg(long)]
+        run: String,
+        /// pause | resume | stop | snapshot | set KEY VALUE
+        #[arg(required = true, num_args = 1..=3)]
+        command: Vec<String>,
+        #[command(flatten)]
+        remote: Remote,
+    },
+    /// List the runs whose bridge answers at an endpoint.
+    Runs {
+        #[command(flatten)]
+        remote: Remote,
     },
     /// Pour and settle a DEM scene's grains; save the packing for scenes to reuse.
     Pack(grains_launch::pack::PackArgs),
@@ -60,6 +93,47 @@ enum BenchCmd {
     Mpm(grains_launch::bench_mpm::MpmArgs),
 }
 
+/// Where the bridge is and who asks.
+#[derive(clap::Args)]
+struct Remote {
+    /// The bridge's zenoh endpoint.
+    #[arg(long, default_value = grains_bridge::config::DEFAULT_LISTEN)]
+    connect: String,
+    /// User name, if the bridge requires credentials; the password is read from the
+    /// environment variable GRAINS_BRIDGE_PASSWORD.
+    #[arg(long)]
+    user: Option<String>,
+}
+
+impl Remote {
+    fn endpoint(&self) -> anyhow::Result<grains_bridge::client::Endpoint> {
+        let credentials = match &self.user {
+            Some(u) => {
+                let p = std::env::var("GRAINS_BRIDGE_PASSWORD")
+                    .map_err(|_| anyhow::anyhow!("--user {u}: set the password in the environment variable GRAINS_BRIDGE_PASSWORD"))?;
+                Some((u.clone(), p))
+            }
+            None => None,
+        };
+        Ok(grains_bridge::client::Endpoint {
+            connect: self.connect.clone(),
+            credentials,
+        })
+    }
+}
+
+/// `grains steer` words as the JSON command the bridge takes.
+fn command_json(words: &[String]) -> anyhow::Result<String> {
+    match words {
+        [c] => Ok(serde_json::json!({ "command": c }).to_string()),
+        [set, key, value] if set == "set" => {
+            let v: f64 = value.parse().map_err(|_| anyhow::anyhow!("set {key}: {value:?} is not a number"))?;
+            Ok(serde_json::json!({ "command": "set", "key": key, "value": v }).to_string())
+        }
+        _ => anyhow::bail!("expected pause, resume, stop, snapshot or set KEY VALUE; got {:?}", words.join(" ")),
+    }
+}
+
 fn parse_role(s: &str) -> Result<Role, String> {
     Role::from_name(s)
         .filter(|r| Role::PARTICIPANTS.contains(r))
@@ -76,6 +150,8 @@ fn main() -> ExitCode {
             out,
             quiet,
             overrides,
+            bridge,
+            bridge_args,
         } => {
             let opts = RunOptions {
                 scene_path: scene,
@@ -85,15 +161,16 @@ fn main() -> ExitCode {
                 progress: !quiet,
                 overrides,
                 announce: true,
+                bridge: bridge.then_some(bridge_args),
             };
             grains_launch::run::run(&opts).map(|o| {
                 eprintln!(
                     "grains: run {} {}: {} (output in {})",
                     o.run_id,
-                    if o.status == grains_launch::run::Status::Completed {
-                        "completed"
-                    } else {
-                        "ended"
+                    match o.status {
+                        grains_launch::run::Status::Completed => "completed",
+                        grains_launch::run::Status::Stopped => "stopped",
+                        _ => "ended",
                     },
                     o.message,
                     o.dir.display()
@@ -101,6 +178,43 @@ fn main() -> ExitCode {
                 o.status.exit_code()
             })
         }
+        Cmd::Monitor { run, rows, remote } => remote
+            .endpoint()
+            .and_then(|ep| grains_bridge::client::monitor(&ep, &run, rows, &mut std::io::stdout().lock()))
+            .map(|()| 0),
+        Cmd::Steer { run, command, remote } => (|| {
+            let json = command_json(&command)?;
+            match grains_bridge::client::steer(&remote.endpoint()?, &run, json.as_bytes())? {
+                Ok(ack) => {
+                    println!("{ack}");
+                    Ok(0)
+                }
+                Err(why) => {
+                    eprintln!("grains: steer: refused: {why}");
+                    Ok(1)
+                }
+            }
+        })(),
+        Cmd::Runs { remote } => remote.endpoint().and_then(|ep| {
+            let runs = grains_bridge::client::runs(&ep, std::time::Duration::from_secs(2))?;
+            if runs.is_empty() {
+                println!("no run answers at {}", ep.connect);
+            }
+            for (id, latest) in runs {
+                match latest {
+                    Some(v) => println!(
+                        "{id}  scene {}  step {}/{}  t = {:.4e} s{}",
+                        v["scene"].as_str().unwrap_or("?"),
+                        v["step"],
+                        v["steps"],
+                        v["time"].as_f64().unwrap_or(0.0),
+                        if v["paused"].as_bool() == Some(true) { "  (paused)" } else { "" }
+                    ),
+                    None => println!("{id}  (no step yet)"),
+                }
+            }
+            Ok(0)
+        }),
         Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
         Cmd::Check { scene } => grains_protocol::scene::load(&scene).map_err(anyhow::Error::from).and_then(|s| {
             if s.synthetic.is_none() {

@@ -49,7 +49,7 @@ pub struct Processes {
     children: Vec<(Role, Option<Child>, u32)>,
 }
 
-fn describe(status: std::process::ExitStatus) -> String {
+pub(crate) fn describe(status: std::process::ExitStatus) -> String {
     match (status.code(), status.signal()) {
         (Some(code), _) => format!("exited with code {code}"),
         (None, Some(sig)) => {
@@ -67,16 +67,30 @@ fn describe(status: std::process::ExitStatus) -> String {
     }
 }
 
+/// A child of the launcher: in its own process group (a terminal's Ctrl-C reaches the
+/// launcher only, which stops the run at a step boundary), with a parent-death signal so that
+/// none outlives a killed launcher.
+pub(crate) fn child_command(bin: &Path) -> Command {
+    let mut cmd = Command::new(bin);
+    cmd.process_group(0);
+    // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+    unsafe {
+        cmd.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+    cmd
+}
+
 impl Processes {
-    /// Starts `roles` as processes of their own, in their own process group (a terminal's
-    /// Ctrl-C reaches the launcher only, which stops the run at a step boundary), with a
-    /// parent-death signal so that none outlives a killed launcher.
+    /// Starts `roles` as processes of their own ([`child_command`]).
     pub fn spawn(roles: &[Role], scene_path: &Path, run_id: &str, out_dir: &Path, connect_timeout: f64) -> anyhow::Result<Self> {
         let dir = bin_dir();
         let mut children = Vec::new();
         for &role in roles {
             let bin = dir.join(role.binary());
-            let mut cmd = Command::new(&bin);
+            let mut cmd = child_command(&bin);
             cmd.arg("--scene")
                 .arg(scene_path)
                 .arg("--run-id")
@@ -85,14 +99,6 @@ impl Processes {
                 .arg(connect_timeout.to_string())
                 .arg("--out-dir")
                 .arg(out_dir);
-            cmd.process_group(0);
-            // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
-            unsafe {
-                cmd.pre_exec(|| {
-                    libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-                    Ok(())
-                });
-            }
             let child = cmd.spawn().map_err(|e| anyhow::anyhow!("cannot start {}: {e}", bin.display()))?;
             let pid = child.id();
             children.push((role, Some(child), pid));

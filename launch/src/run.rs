@@ -7,12 +7,14 @@
 //! summaries, supervises them (a participant that dies is named within a second and the
 //! others are stopped), and cleans up every file of the run at the end.
 
+use crate::bridge::Bridge;
 use crate::outputs::{Metrics, write_atomic};
 use crate::participants::{Participants, Processes, Threads};
 use anyhow::{Context, bail};
+use grains_bridge::config::BridgeArgs;
 use grains_protocol::names;
 use grains_protocol::scene::{self, Scene};
-use grains_protocol::wire::{Command, Control, HELLO_READY, Hello, StepHeader, Summary, Verdict, Welcome};
+use grains_protocol::wire::{Ack, AckStatus, Command, Control, HELLO_READY, Hello, StepHeader, Summary, Verdict, Welcome};
 use grains_protocol::{HELLO_MAGIC, PROTOCOL_VERSION, Role, run_id_bytes};
 use grains_service::signals::StopFlag;
 use grains_transport::{Publisher, Subscriber, Transport, inproc::InProc, ipc};
@@ -42,6 +44,8 @@ pub struct RunOptions {
     pub overrides: Vec<String>,
     /// Say on stderr what the run is (id, output directory, participants) and how it ended.
     pub announce: bool,
+    /// Start the zenoh bridge with these flags.
+    pub bridge: Option<BridgeArgs>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,12 +53,14 @@ pub enum Status {
     Completed,
     Failed,
     Interrupted,
+    /// Ended early by a `stop` control command (from the bridge).
+    Stopped,
 }
 
 impl Status {
     pub fn exit_code(self) -> u8 {
         match self {
-            Status::Completed => 0,
+            Status::Completed | Status::Stopped => 0,
             Status::Failed => 1,
             Status::Interrupted => 130,
         }
@@ -64,6 +70,7 @@ impl Status {
             Status::Completed => "completed",
             Status::Failed => "failed",
             Status::Interrupted => "interrupted",
+            Status::Stopped => "stopped",
         }
     }
 }
@@ -174,6 +181,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             "--external needs --transport ipc: an external participant is another process".into()
         ));
     }
+    let bridge_cfg = match &opts.bridge {
+        Some(args) => Some(args.resolve().map_err(|e| BadInput(format!("{e:#}")))?),
+        None => None,
+    };
     let run_id = new_run_id();
     let dir = opts.out_root.join(&scene.name).join(&run_id);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
@@ -197,7 +208,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary())?;
             let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
             let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
-            let result = supervise(&transport, &ctx, || {
+            let bridge = || match &opts.bridge {
+                Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir).map(Some),
+                None => Ok(None),
+            };
+            let result = supervise(&transport, &ctx, bridge, || {
                 Ok(Box::new(Processes::spawn(&spawned, &scene_path, &run_id, &dir, external_timeout)?) as Box<dyn Participants>)
             });
             drop(transport);
@@ -206,7 +221,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         }
         TransportKind::Inproc => {
             let bus = InProc::new();
-            supervise(&bus, &ctx, || {
+            let bridge = || match &bridge_cfg {
+                Some(cfg) => Bridge::spawn_thread(cfg, &bus, &scene, &run_id, &dir).map(Some),
+                None => Ok(None),
+            };
+            supervise(&bus, &ctx, bridge, || {
                 Ok(Box::new(Threads::spawn(&roles, &scene, &run_id, &dir, &bus)?) as Box<dyn Participants>)
             })?
         }
@@ -237,6 +256,7 @@ const WAIT: Duration = Duration::from_millis(50);
 fn supervise<T: Transport>(
     t: &T,
     ctx: &RunCtx,
+    start_bridge: impl FnOnce() -> anyhow::Result<Option<Bridge>>,
     start: impl FnOnce() -> anyhow::Result<Box<dyn Participants>>,
 ) -> anyhow::Result<(RunOutcome, serde_json::Value)> {
     let scene = ctx.scene;
@@ -245,9 +265,19 @@ fn supervise<T: Transport>(
     let mut welcome_pub = t.publisher::<Welcome, ()>(&names::WELCOME, 1)?;
     let mut summary_sub = t.subscriber::<Summary, StepHeader>(&names::SUMMARY)?;
     let mut control_pub = t.publisher::<Control, StepHeader>(&names::CONTROL, 1)?;
+    let mut ack_sub = t.subscriber::<Ack, StepHeader>(&names::ACK)?;
     let mut metrics = Metrics::create(ctx.dir, ctx.roles).with_context(|| format!("creating metrics in {}", ctx.dir.display()))?;
     let stop = StopFlag::with_signals();
-    let mut parts = start()?;
+    let mut bridge = start_bridge()?;
+    let mut parts = match start() {
+        Ok(p) => p,
+        Err(e) => {
+            if let Some(b) = &mut bridge {
+                b.stop(Duration::from_secs(1));
+            }
+            return Err(e);
+        }
+    };
 
     let how = match ctx.opts.transport {
         TransportKind::Ipc => "processes",
@@ -266,6 +296,16 @@ fn supervise<T: Transport>(
     if ctx.opts.announce && !pids.is_empty() {
         eprintln!("grains: started as {how}: {}", pids.join(", "));
     }
+    if ctx.opts.announce
+        && let Some(b) = &bridge
+    {
+        let pid = b.pid().map_or_else(|| "(thread)".to_string(), |p| format!("(pid {p})"));
+        eprintln!(
+            "grains: started the bridge: {} {pid}; its settings: {}",
+            Role::Bridge.binary(),
+            ctx.dir.join("bridge.json").display()
+        );
+    }
     for e in &ctx.opts.external {
         eprintln!(
             "grains: waiting for an external {e} to attach; start it with:\n  {} --scene {} --run-id {}",
@@ -280,6 +320,8 @@ fn supervise<T: Transport>(
     let mut interrupted = false;
     let mut stop_sent: Option<Instant> = None;
     let mut release: Option<Instant> = None;
+    // Step after which a control command (from the bridge) stopped the run.
+    let mut stopped_at: Option<u64> = None;
     let mut last_dead_check = Instant::now();
     let mut progress = Progress::new(ctx.opts.progress, scene.steps);
     let n_spawned = parts.pids().len();
@@ -325,6 +367,35 @@ fn supervise<T: Transport>(
         }
         progress.show(metrics.last, release);
 
+        // Acknowledged commands: what the time owner did, said once on stderr.
+        while let Some(Some(a)) = ack_sub.receive(Duration::ZERO, |_, a| a.first().copied())? {
+            let Some(c) = Command::from_code(a.command) else { continue };
+            if a.status != AckStatus::Applied as u32 {
+                continue;
+            }
+            if c == Command::Stop && !interrupted {
+                stopped_at = Some(a.step);
+            }
+            if ctx.opts.announce && !interrupted {
+                eprintln!(
+                    "\ngrains: {} by a control command after step {}",
+                    match c {
+                        Command::Pause => "paused",
+                        Command::Resume => "resumed",
+                        Command::Stop => "stopping",
+                        _ => "acknowledged",
+                    },
+                    a.step
+                );
+            }
+        }
+        if let Some(b) = &mut bridge
+            && let Some(how) = b.poll()
+        {
+            eprintln!("\ngrains: warning: the bridge {how}; the run goes on without remote access");
+            bridge = None;
+        }
+
         // Supervision: our children, then dead nodes (external participants too).
         for exit in parts.poll_exits() {
             let pid = parts.pids().iter().find(|(r, _)| *r == exit.role).map_or(0, |(_, p)| *p);
@@ -335,7 +406,10 @@ fn supervise<T: Transport>(
         }
         if last_dead_check.elapsed() > Duration::from_millis(300) {
             last_dead_check = Instant::now();
-            let dead = t.dead_peers();
+            let (gone_bridge, dead): (Vec<_>, Vec<_>) = t.dead_peers().into_iter().partition(|d| d.starts_with(Role::Bridge.binary()));
+            if !gone_bridge.is_empty() && bridge.is_some() {
+                eprintln!("\ngrains: warning: the bridge died; the run goes on without remote access");
+            }
             if !dead.is_empty() && failure.is_none() && !interrupted {
                 failure = Some(format!("participant {} died", dead.join(", ")));
             }
@@ -398,6 +472,9 @@ fn supervise<T: Transport>(
     if ctx.opts.announce {
         progress.finish(metrics.last, release);
     }
+    if let Some(b) = &mut bridge {
+        b.stop(Duration::from_secs(2));
+    }
 
     let steps_done = metrics.last.map_or(0, |(s, _)| s);
     let stepping = release.map_or(Duration::ZERO, |r| r.elapsed());
@@ -408,6 +485,8 @@ fn supervise<T: Transport>(
         (Status::Failed, f)
     } else if interrupted {
         (Status::Interrupted, format!("interrupted after step {steps_done}"))
+    } else if let Some(at) = stopped_at {
+        (Status::Stopped, format!("stopped by a control command after step {at}"))
     } else if steps_done < scene.steps {
         (
             Status::Failed,

@@ -34,6 +34,7 @@ fn load_with(path: &Path, overrides: &[String]) -> anyhow::Result<grains_protoco
 /// One run of `scene` with `overrides` as processes, quietly, under `<out>/runs`.
 fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyhow::Result<crate::run::RunOutcome> {
     run(&RunOptions {
+        bridge: None,
         scene_path: scene.to_path_buf(),
         transport: TransportKind::Ipc,
         external: Vec::new(),

@@ -32,7 +32,14 @@ pub const CONTROL: ServiceSpec = ServiceSpec {
     max_subscribers: 1,
     buffer: 16,
 };
-/// Every participant → launcher: one summary per macro-step.
+/// Time owner → launcher and bridge: what became of each control command.
+pub const ACK: ServiceSpec = ServiceSpec {
+    name: "grains/run/ack",
+    max_publishers: 1,
+    max_subscribers: 2,
+    buffer: 16,
+};
+/// Every participant → launcher (and the bridge): one summary per macro-step.
 pub const SUMMARY: ServiceSpec = ServiceSpec {
     name: "grains/run/summary",
     max_publishers: 6,
@@ -115,10 +122,11 @@ pub struct ServiceSpec {
 }
 
 /// Every service of a run, for the spec and for cleanup.
-pub const ALL: [ServiceSpec; 13] = [
+pub const ALL: [ServiceSpec; 14] = [
     HELLO,
     WELCOME,
     CONTROL,
+    ACK,
     SUMMARY,
     STEP_BEGIN,
     DEM_RASTER,

@@ -267,4 +267,53 @@ impl Command {
         use Command::*;
         [Pause, Resume, Stop, Snapshot, Set].into_iter().find(|c| *c as u32 == code)
     }
+
+    /// Lower-case name, as remote clients spell it (`pause`, `set`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Command::Pause => "pause",
+            Command::Resume => "resume",
+            Command::Stop => "stop",
+            Command::Snapshot => "snapshot",
+            Command::Set => "set",
+        }
+    }
+}
+
+wire_type! {
+    /// What became of a [`Control`] (time owner → launcher and bridge on
+    /// [`crate::names::ACK`]). 32 bytes.
+    "grains.Ack.v1",
+    pub struct Ack {
+        /// [`Control::seq`] of the command.
+        pub seq: u64,
+        /// The last macro-step completed when the command took effect (or was refused).
+        pub step: u64,
+        /// [`Command`] code as received.
+        pub command: u32,
+        /// [`AckStatus`] code.
+        pub status: u32,
+        /// [`Control::key`] as received.
+        pub key: u32,
+        pub _pad: u32,
+    }
+}
+
+/// [`Ack::status`] codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum AckStatus {
+    /// Took effect after [`Ack::step`].
+    Applied = 0,
+    /// A command code this time owner does not know.
+    UnknownCommand = 1,
+    /// A known command this run's participants cannot carry out (yet).
+    Unsupported = 2,
+}
+
+impl AckStatus {
+    pub fn from_code(code: u32) -> Option<AckStatus> {
+        use AckStatus::*;
+        [Applied, UnknownCommand, Unsupported].into_iter().find(|c| *c as u32 == code)
+    }
 }

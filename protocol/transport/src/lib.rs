@@ -38,6 +38,7 @@ unsafe impl Pod for SpawnGrain {}
 unsafe impl Pod for SpawnPoint {}
 unsafe impl Pod for Summary {}
 unsafe impl Pod for Control {}
+unsafe impl Pod for Ack {}
 unsafe impl Pod for u64 {}
 unsafe impl Pod for () {}
 

@@ -7,7 +7,9 @@ use crate::session::Session;
 use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
-use grains_protocol::wire::{Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ZoneCell};
+use grains_protocol::wire::{
+    Ack, AckStatus, Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ZoneCell,
+};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::time::{Duration, Instant};
@@ -190,15 +192,12 @@ pub fn next_step<T: Transport>(
 
 /// A solver that owns time: it steps by itself and obeys control commands between steps.
 fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scene, solver: &mut S) -> anyhow::Result<()> {
-    let mut control = session.subscriber::<Control, StepHeader>(&names::CONTROL)?;
+    let mut clock = RunClock::open(session)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
-    session.wait_until("the launcher", |_| {
-        control.publisher_count() >= 1 && summary_pub.subscriber_count() >= 1
-    })?;
+    session.wait_until("the launcher", |_| clock.connected() && summary_pub.subscriber_count() >= 1)?;
     session.ready()?;
-    let mut clock = RunClock::default();
     for step in 1..=scene.steps {
-        if !clock.obey_control(session, &mut control)? {
+        if !clock.obey(session, step - 1)? {
             break;
         }
         let window = StepWindow::of(scene, step);
@@ -240,30 +239,61 @@ pub fn publish_summary<T: Transport>(
     Ok(())
 }
 
-/// Pause/resume/stop state of the time owner.
-#[derive(Debug, Default)]
-pub struct RunClock {
+/// The time owner's side of the control service: commands in, acknowledgements out, and
+/// the pause state.
+pub struct RunClock<T: Transport> {
+    control: T::Subscriber<Control, StepHeader>,
+    ack: T::Publisher<Ack, StepHeader>,
     paused: bool,
 }
 
-impl RunClock {
-    /// Applies pending control commands; while paused, blocks on the control service (with
-    /// liveness checks). Returns `false` when the run must stop before the next step.
-    pub fn obey_control<T: Transport>(
-        &mut self,
-        session: &Session<'_, T>,
-        control: &mut T::Subscriber<Control, StepHeader>,
-    ) -> anyhow::Result<bool> {
+impl<T: Transport> RunClock<T> {
+    pub fn open(session: &Session<'_, T>) -> anyhow::Result<Self> {
+        Ok(RunClock {
+            control: session.subscriber(&names::CONTROL)?,
+            ack: session.publisher(&names::ACK, 1)?,
+            paused: false,
+        })
+    }
+
+    /// The launcher is connected (its control publisher and acknowledgement subscriber).
+    pub fn connected(&mut self) -> bool {
+        self.control.publisher_count() >= 1 && self.ack.subscriber_count() >= 1
+    }
+
+    /// Applies pending control commands after macro-step `done`, acknowledging each; while
+    /// paused, blocks on the control service (with liveness checks). Returns `false` when the
+    /// run must stop before the next step.
+    pub fn obey(&mut self, session: &Session<'_, T>, done: u64) -> anyhow::Result<bool> {
         loop {
             let timeout = if self.paused { crate::session::POLL } else { Duration::ZERO };
-            match control.receive(timeout, |_, c| c.first().copied())? {
-                Some(Some(c)) => match Command::from_code(c.command) {
-                    Some(Command::Stop) => return Ok(false),
-                    Some(Command::Pause) => self.paused = true,
-                    Some(Command::Resume) => self.paused = false,
-                    // Snapshot and set act on solvers' state: they arrive with the solvers.
-                    Some(Command::Snapshot | Command::Set) | None => {}
-                },
+            match self.control.receive(timeout, |_, c| c.first().copied())? {
+                Some(Some(c)) => {
+                    let status = match Command::from_code(c.command) {
+                        Some(Command::Stop | Command::Pause | Command::Resume) => AckStatus::Applied,
+                        // Snapshot and set act on the solvers' state: not carried yet.
+                        Some(Command::Snapshot | Command::Set) => AckStatus::Unsupported,
+                        None => AckStatus::UnknownCommand,
+                    };
+                    let header = session.header(done, 0.0, 0.0);
+                    self.ack.publish(1, |h, out| {
+                        *h = header;
+                        out[0] = Ack {
+                            seq: c.seq,
+                            step: done,
+                            command: c.command,
+                            status: status as u32,
+                            key: c.key,
+                            _pad: 0,
+                        };
+                    })?;
+                    match Command::from_code(c.command) {
+                        Some(Command::Stop) => return Ok(false),
+                        Some(Command::Pause) => self.paused = true,
+                        Some(Command::Resume) => self.paused = false,
+                        _ => {}
+                    }
+                }
                 Some(None) => {}
                 None if self.paused => session.check_alive("a resume command")?,
                 None => return Ok(true),

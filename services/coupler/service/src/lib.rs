@@ -7,7 +7,7 @@
 
 use anyhow::bail;
 use grains_protocol::names;
-use grains_protocol::wire::{Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
+use grains_protocol::wire::{NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -15,7 +15,7 @@ use std::time::Instant;
 
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     let mut session = join(transport, Role::Coupler, scene, opts)?;
-    let mut control = session.subscriber::<Control, StepHeader>(&names::CONTROL)?;
+    let mut clock = RunClock::open(&session)?;
     let mut dem_sub = session.subscriber::<RasterNode, StepHeader>(&names::DEM_RASTER)?;
     let mut mpm_sub = session.subscriber::<RasterNode, StepHeader>(&names::MPM_RASTER)?;
     let mut step_pub = session.publisher::<StepBegin, StepHeader>(&names::STEP_BEGIN, 1)?;
@@ -24,7 +24,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     // The solvers, and the oracle when the run has one, follow the steps.
     let step_subscribers = 2 + usize::from(scene.participants().contains(&Role::Oracle));
     session.wait_until("the DEM, the MPM, the oracle and the launcher", |_| {
-        control.publisher_count() >= 1
+        clock.connected()
             && dem_sub.publisher_count() >= 1
             && mpm_sub.publisher_count() >= 1
             && step_pub.subscriber_count() >= step_subscribers
@@ -33,10 +33,9 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     })?;
     session.ready()?;
 
-    let mut clock = RunClock::default();
     let mut last = 0;
     for step in 1..=scene.steps {
-        if !clock.obey_control(&session, &mut control)? {
+        if !clock.obey(&session, step - 1)? {
             break;
         }
         let window = StepWindow::of(scene, step);

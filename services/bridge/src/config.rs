@@ -1,0 +1,279 @@
+//! What the bridge listens on and who may do what: the bridge's settings, the zenoh
+//! configuration made of them (bridge and clients), and the key names of a run.
+
+use anyhow::{Context, bail};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Default zenoh endpoint of a bridge: loopback only.
+pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
+
+/// Key expressions of a run, the only place they are spelled.
+pub mod keys {
+    pub fn summary(run: &str) -> String {
+        format!("grains/{run}/state/summary")
+    }
+    pub fn config(run: &str) -> String {
+        format!("grains/{run}/state/config")
+    }
+    pub fn state_all(run: &str) -> String {
+        format!("grains/{run}/state/**")
+    }
+    pub fn control(run: &str) -> String {
+        format!("grains/{run}/control")
+    }
+    pub fn alive(run: &str, who: &str) -> String {
+        format!("grains/{run}/alive/{who}")
+    }
+    /// Liveliness tokens of every run's bridge (for `grains runs`).
+    pub const ALL_BRIDGES: &str = "grains/*/alive/bridge";
+    /// The run id in a key `grains/<run>/...`.
+    pub fn run_of(key: &str) -> Option<&str> {
+        key.strip_prefix("grains/")?.split('/').next()
+    }
+}
+
+/// The bridge's settings: command-line flags, optionally a TOML file (`--config`) whose
+/// values the flags override.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BridgeConfig {
+    /// zenoh endpoints to listen on.
+    #[serde(default = "default_listen")]
+    pub listen: Vec<String>,
+    /// Whether remote clients may steer (pause, resume, stop, snapshot, set).
+    #[serde(default)]
+    pub steering: bool,
+    /// Summaries per second at most (0: every macro-step).
+    #[serde(default = "default_rate")]
+    pub rate: f64,
+    /// Access control: without it anyone who can reach the endpoint may read (and steer,
+    /// if steering is on).
+    #[serde(default)]
+    pub auth: Option<Auth>,
+}
+
+/// zenoh user/password authentication plus an access-control list built from it.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Auth {
+    /// zenoh's dictionary file: one `user:password` per line.
+    pub users_file: PathBuf,
+    /// Users that may read the state (summaries, liveliness, queries).
+    #[serde(default)]
+    pub readers: Vec<String>,
+    /// Users that may also send commands.
+    #[serde(default)]
+    pub steerers: Vec<String>,
+}
+
+fn default_listen() -> Vec<String> {
+    vec![DEFAULT_LISTEN.to_string()]
+}
+
+fn default_rate() -> f64 {
+    10.0
+}
+
+impl Default for BridgeConfig {
+    fn default() -> Self {
+        BridgeConfig {
+            listen: default_listen(),
+            steering: false,
+            rate: default_rate(),
+            auth: None,
+        }
+    }
+}
+
+impl BridgeConfig {
+    /// Reads a TOML settings file; relative paths in it are relative to the file.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading the bridge settings {}", path.display()))?;
+        let mut c: BridgeConfig = toml::from_str(&text).map_err(|e| {
+            let line = e.span().map(|s| text[..s.start].lines().count().max(1));
+            anyhow::anyhow!(
+                "{}{}: {}",
+                path.display(),
+                line.map_or(String::new(), |l| format!(":{l}")),
+                e.message()
+            )
+        })?;
+        if let Some(auth) = &mut c.auth
+            && auth.users_file.is_relative()
+        {
+            auth.users_file = path.parent().unwrap_or(Path::new(".")).join(&auth.users_file);
+        }
+        c.check()?;
+        Ok(c)
+    }
+
+    pub fn check(&self) -> anyhow::Result<()> {
+        if self.listen.is_empty() {
+            bail!("bridge: listen: at least one endpoint, e.g. {DEFAULT_LISTEN:?}");
+        }
+        for e in &self.listen {
+            if !e.starts_with("tcp/") {
+                bail!("bridge: listen: {e:?}: this build speaks TCP only (tcp/<address>:<port>)");
+            }
+        }
+        if !(self.rate.is_finite() && self.rate >= 0.0) {
+            bail!("bridge: rate: {} is not a rate; summaries per second, 0 for every step", self.rate);
+        }
+        if let Some(a) = &self.auth {
+            if !a.users_file.is_file() {
+                bail!("bridge: auth.users_file: {} does not exist", a.users_file.display());
+            }
+            if a.readers.is_empty() && a.steerers.is_empty() {
+                bail!("bridge: auth: no readers and no steerers: nobody could use the bridge");
+            }
+        }
+        Ok(())
+    }
+
+    /// The zenoh configuration of the bridge of `run`: a peer that listens on the endpoints,
+    /// connects nowhere and does not scout; with `auth`, user/password and a deny-by-default
+    /// access-control list (readers: state and liveliness; steerers: also control).
+    pub fn zenoh(&self, run: &str) -> anyhow::Result<zenoh::Config> {
+        let mut c = zenoh::Config::default();
+        let set =
+            |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("zenoh config {k} = {v}: {e}"));
+        set(&mut c, "mode", r#""peer""#)?;
+        set(&mut c, "listen/endpoints", &serde_json::to_string(&self.listen)?)?;
+        set(&mut c, "connect/endpoints", "[]")?;
+        set(&mut c, "scouting/multicast/enabled", "false")?;
+        set(&mut c, "scouting/gossip/enabled", "false")?;
+        if let Some(a) = &self.auth {
+            set(
+                &mut c,
+                "transport/auth/usrpwd/dictionary_file",
+                &serde_json::to_string(&a.users_file.display().to_string())?,
+            )?;
+            set(&mut c, "access_control", &self.acl(run).to_string())?;
+        }
+        Ok(c)
+    }
+
+    /// The access-control list of `run` (zenoh's `access_control` section).
+    pub fn acl(&self, run: &str) -> serde_json::Value {
+        let Some(a) = &self.auth else {
+            return serde_json::json!({ "enabled": false });
+        };
+        let read_keys = [
+            keys::state_all(run),
+            format!("grains/{run}/alive/**"),
+            keys::ALL_BRIDGES.to_string(),
+        ];
+        let readers: Vec<&String> = a.readers.iter().chain(&a.steerers).collect();
+        serde_json::json!({
+            "enabled": true,
+            "default_permission": "deny",
+            "rules": [
+                { "id": "read", "permission": "allow", "flows": ["ingress", "egress"],
+                  "messages": ["declare_subscriber", "put", "query", "reply", "liveliness_token",
+                               "liveliness_query", "declare_liveliness_subscriber"],
+                  "key_exprs": read_keys },
+                { "id": "steer", "permission": "allow", "flows": ["ingress", "egress"],
+                  "messages": ["query", "reply"],
+                  "key_exprs": [keys::control(run)] },
+            ],
+            "subjects": [
+                { "id": "readers", "usernames": readers },
+                { "id": "steerers", "usernames": a.steerers },
+            ],
+            "policies": [
+                { "rules": ["read"], "subjects": ["readers"] },
+                { "rules": ["steer"], "subjects": ["steerers"] },
+            ],
+        })
+    }
+
+    /// What the bridge runs with, for its log and `bridge.json` (no passwords).
+    pub fn effective(&self, run: &str) -> serde_json::Value {
+        serde_json::json!({
+            "run": run,
+            "listen": self.listen,
+            "steering": self.steering,
+            "rate": self.rate,
+            "auth": self.auth.as_ref().map(|a| serde_json::json!({
+                "users_file": a.users_file.display().to_string(),
+                "readers": a.readers,
+                "steerers": a.steerers,
+            })),
+            "keys": {
+                "summary": keys::summary(run),
+                "config": keys::config(run),
+                "control": keys::control(run),
+                "alive": keys::alive(run, "*"),
+            },
+        })
+    }
+}
+
+/// The zenoh configuration of a remote client: connects to `endpoint` only, no scouting,
+/// with credentials if given.
+pub fn client(endpoint: &str, credentials: Option<(&str, &str)>) -> anyhow::Result<zenoh::Config> {
+    let mut c = zenoh::Config::default();
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("zenoh config {k} = {v}: {e}"));
+    set(&mut c, "mode", r#""client""#)?;
+    set(&mut c, "connect/endpoints", &serde_json::to_string(&[endpoint])?)?;
+    set(&mut c, "scouting/multicast/enabled", "false")?;
+    if let Some((user, password)) = credentials {
+        set(&mut c, "transport/auth/usrpwd/user", &serde_json::to_string(user)?)?;
+        set(&mut c, "transport/auth/usrpwd/password", &serde_json::to_string(password)?)?;
+    }
+    Ok(c)
+}
+
+/// The bridge's flags, shared by `grains run` (which passes them on) and `grains-bridge`.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct BridgeArgs {
+    /// Bridge settings file (TOML: listen, steering, rate, [auth]); the flags override it.
+    #[arg(long = "bridge-config", value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// zenoh endpoint the bridge listens on (repeatable) [default: tcp/127.0.0.1:7447].
+    #[arg(long = "bridge-listen", value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Let remote clients pause, resume and stop the run (off: every command is refused).
+    #[arg(long)]
+    pub steering: bool,
+    /// Summaries per second at most, 0 for every macro-step [default: 10].
+    #[arg(long = "bridge-rate", value_name = "HZ")]
+    pub rate: Option<f64>,
+}
+
+impl BridgeArgs {
+    pub fn resolve(&self) -> anyhow::Result<BridgeConfig> {
+        let mut c = match &self.config {
+            Some(path) => BridgeConfig::load(path)?,
+            None => BridgeConfig::default(),
+        };
+        if !self.listen.is_empty() {
+            c.listen = self.listen.clone();
+        }
+        c.steering |= self.steering;
+        if let Some(rate) = self.rate {
+            c.rate = rate;
+        }
+        c.check()?;
+        Ok(c)
+    }
+
+    /// The same flags, for a child process.
+    pub fn to_args(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(c) = &self.config {
+            out.extend(["--bridge-config".to_string(), c.display().to_string()]);
+        }
+        for l in &self.listen {
+            out.extend(["--bridge-listen".to_string(), l.clone()]);
+        }
+        if self.steering {
+            out.push("--steering".into());
+        }
+        if let Some(r) = self.rate {
+            out.extend(["--bridge-rate".to_string(), r.to_string()]);
+        }
+        out
+    }
+}

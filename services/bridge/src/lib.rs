@@ -1,0 +1,264 @@
+//! The zenoh bridge of a run: the only door to a run from outside.
+//!
+//! Out: the participants' summaries, gathered per macro-step, on `grains/<run>/state/summary`
+//! (at most `rate` per second, dropped rather than queued for slow clients), the latest of
+//! each under the queryable `grains/<run>/state/**`, and liveliness tokens
+//! `grains/<run>/alive/<bridge|dem|mpm|…>`. In: commands as queries on `grains/<run>/control`
+//! (only with steering on), checked ([`command`]), sent to the time owner over the control
+//! service and answered with its acknowledgement: the step at which the command took effect,
+//! or why it was refused. A query is never dropped: every command gets an answer.
+//!
+//! The bridge is expendable: it is not admitted to the run, the run does not wait for it, and
+//! if it dies the run goes on. It never blocks the participants: it drains their summaries
+//! every 20 ms whatever its clients do.
+
+pub mod client;
+pub mod command;
+pub mod config;
+pub mod state;
+
+use anyhow::Context;
+use config::{BridgeConfig, keys};
+use grains_protocol::wire::{Ack, AckStatus, Command, Control, StepHeader, Summary};
+use grains_protocol::{PROTOCOL_VERSION, Role, names, run_id_bytes, scene::Scene};
+use grains_service::signals::StopFlag;
+use grains_transport::{Publisher, Subscriber, Transport};
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+use zenoh::query::Query;
+
+/// How long a command waits for the time owner's acknowledgement.
+pub const ACK_TIMEOUT: Duration = Duration::from_secs(5);
+/// Sequence numbers of the bridge's commands start here (the launcher's are small).
+const SEQ_BASE: u64 = 1 << 32;
+
+enum Incoming {
+    State(Query),
+    Control(Query),
+}
+
+/// Serves run `run` until `stop` trips. `out_dir`, if given, receives `bridge.json` (the
+/// effective settings).
+pub fn serve<T: Transport>(
+    t: &T,
+    cfg: &BridgeConfig,
+    run: &str,
+    scene: &Scene,
+    out_dir: Option<&Path>,
+    stop: &StopFlag,
+) -> anyhow::Result<()> {
+    cfg.check()?;
+    let mut summaries = t.subscriber::<Summary, StepHeader>(&names::SUMMARY)?;
+    let mut acks = t.subscriber::<Ack, StepHeader>(&names::ACK)?;
+    // No control port at all unless steering is on.
+    let mut control = match cfg.steering {
+        true => Some(t.publisher::<Control, StepHeader>(&names::CONTROL, 1)?),
+        false => None,
+    };
+
+    let effective = cfg.effective(run);
+    eprintln!("grains-bridge: run {run}: {effective}");
+    if let Some(dir) = out_dir {
+        let text = serde_json::to_string_pretty(&effective)? + "\n";
+        std::fs::write(dir.join("bridge.json"), text).with_context(|| format!("writing {}", dir.join("bridge.json").display()))?;
+    }
+    let session = zenoh::open(cfg.zenoh(run)?)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("grains-bridge: cannot open zenoh on {:?}: {e}", cfg.listen))?;
+    let summary_pub = session
+        .declare_publisher(keys::summary(run))
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::summary(run)))?;
+    let (tx, rx) = mpsc::channel();
+    let tx_state = tx.clone();
+    let _state_q = session
+        .declare_queryable(keys::state_all(run))
+        .callback(move |q| {
+            let _ = tx_state.send(Incoming::State(q));
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::state_all(run)))?;
+    let _control_q = session
+        .declare_queryable(keys::control(run))
+        .callback(move |q| {
+            let _ = tx.send(Incoming::Control(q));
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::control(run)))?;
+    let liveliness = session.liveliness();
+    let _bridge_token = liveliness
+        .declare_token(keys::alive(run, "bridge"))
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::alive(run, "bridge")))?;
+    let mut tokens: HashMap<Role, zenoh::liveliness::LivelinessToken> = HashMap::new();
+
+    let roles = scene.participants();
+    let mut gather = state::Gather::new(&roles);
+    let mut paused = false;
+    let mut seq = SEQ_BASE;
+    let mut pending: HashMap<u64, (Query, command::Checked, Instant)> = HashMap::new();
+    let mut published: Option<(u64, Instant)> = None;
+    let mut last_dead_check = Instant::now();
+    let min_interval = if cfg.rate > 0.0 {
+        Duration::from_secs_f64(1.0 / cfg.rate)
+    } else {
+        Duration::ZERO
+    };
+    let doc = |gather: &state::Gather, paused: bool| gather.document(run, &scene.name, scene.steps, paused);
+
+    while !stop.is_set() {
+        // Summaries: wait up to 20 ms for one, then drain.
+        let mut timeout = Duration::from_millis(20);
+        while let Some(s) = summaries.receive(timeout, |_, s| s.first().copied())? {
+            timeout = Duration::ZERO;
+            let Some(s) = s else { continue };
+            if let Some(role) = Role::from_code(s.role)
+                && !tokens.contains_key(&role)
+                && let Ok(token) = liveliness.declare_token(keys::alive(run, role.name())).wait()
+            {
+                tokens.insert(role, token);
+            }
+            gather.add(s);
+        }
+
+        // Acknowledgements of our commands (and the launcher's: they change the pause state).
+        while let Some(Some(a)) = acks.receive(Duration::ZERO, |_, a| a.first().copied())? {
+            if a.status == AckStatus::Applied as u32 {
+                match Command::from_code(a.command) {
+                    Some(Command::Pause) => paused = true,
+                    Some(Command::Resume) => paused = false,
+                    _ => {}
+                }
+            }
+            if let Some((q, c, _)) = pending.remove(&a.seq) {
+                answer_ack(&q, &c, &a);
+            }
+        }
+        let now = Instant::now();
+        pending.retain(|_, (q, c, since)| {
+            let expired = now.duration_since(*since) > ACK_TIMEOUT;
+            if expired {
+                let why = format!(
+                    "{}: no acknowledgement from the time owner within {} s (the run may have ended)",
+                    c.command.name(),
+                    ACK_TIMEOUT.as_secs()
+                );
+                let _ = q.reply_err(error_json(&why)).wait();
+            }
+            !expired
+        });
+
+        // Queries from clients.
+        while let Ok(incoming) = rx.try_recv() {
+            match incoming {
+                Incoming::State(q) => {
+                    for (key, value) in [
+                        (keys::summary(run), doc(&gather, paused)),
+                        (keys::config(run), Some(effective.clone())),
+                    ] {
+                        let Some(value) = value else { continue };
+                        let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key.as_str()) else {
+                            continue;
+                        };
+                        if q.key_expr().intersects(&k) {
+                            let _ = q.reply(k, value.to_string()).wait();
+                        }
+                    }
+                }
+                Incoming::Control(q) => {
+                    let payload = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
+                    let Some(control) = control.as_mut() else {
+                        let _ = q
+                            .reply_err(error_json(
+                                "steering is disabled for this run: every command is refused (start it with grains run --bridge --steering)",
+                            ))
+                            .wait();
+                        continue;
+                    };
+                    match command::parse(&payload) {
+                        Err(why) => {
+                            let _ = q.reply_err(error_json(&why)).wait();
+                        }
+                        Ok(c) => {
+                            seq += 1;
+                            let header = StepHeader {
+                                protocol_version: PROTOCOL_VERSION,
+                                sender: Role::Bridge as u32,
+                                step: gather.latest_step().unwrap_or(0),
+                                run_id: run_id_bytes(run),
+                                ..StepHeader::default()
+                            };
+                            let msg = Control {
+                                seq,
+                                command: c.command as u32,
+                                key: c.key,
+                                value: c.value,
+                            };
+                            control.publish(1, |h, out| {
+                                *h = header;
+                                out[0] = msg;
+                            })?;
+                            pending.insert(seq, (q, c, Instant::now()));
+                        }
+                    }
+                }
+            }
+        }
+
+        // The latest complete step, at most `rate` times a second.
+        if let Some(step) = gather.latest_step()
+            && published.is_none_or(|(s, at)| s < step && at.elapsed() >= min_interval)
+            && let Some(d) = doc(&gather, paused)
+        {
+            let _ = summary_pub.put(d.to_string()).wait();
+            published = Some((step, Instant::now()));
+        }
+
+        // Participants that died lose their token.
+        if last_dead_check.elapsed() > Duration::from_millis(500) {
+            last_dead_check = Instant::now();
+            for dead in t.dead_peers() {
+                tokens.retain(|role, _| !dead.starts_with(&format!("{} ", role.binary())));
+            }
+        }
+    }
+    for (q, c, _) in pending.into_values() {
+        let _ = q
+            .reply_err(error_json(&format!("{}: the bridge is shutting down", c.command.name())))
+            .wait();
+    }
+    drop(tokens);
+    let _ = session.close().wait();
+    Ok(())
+}
+
+fn error_json(why: &str) -> String {
+    serde_json::json!({ "ok": false, "error": why }).to_string()
+}
+
+/// Answers a command query with the time owner's acknowledgement.
+fn answer_ack(q: &Query, c: &command::Checked, a: &Ack) {
+    let applied = a.status == AckStatus::Applied as u32;
+    if applied {
+        let body = serde_json::json!({ "ok": true, "command": c.command.name(), "step": a.step, "seq": a.seq });
+        let _ = q.reply(q.key_expr().clone(), body.to_string()).wait();
+        return;
+    }
+    let why = match AckStatus::from_code(a.status) {
+        Some(AckStatus::Unsupported) => format!(
+            "{}: refused by the time owner at step {}: this build's participants cannot carry it out during a run yet",
+            c.command.name(),
+            a.step
+        ),
+        _ => format!(
+            "{}: refused by the time owner at step {} (status {})",
+            c.command.name(),
+            a.step,
+            a.status
+        ),
+    };
+    let _ = q.reply_err(error_json(&why)).wait();
+}
