@@ -368,27 +368,7 @@ fn supervise<T: Transport>(
         progress.show(metrics.last, release);
 
         // Acknowledged commands: what the time owner did, said once on stderr.
-        while let Some(Some(a)) = ack_sub.receive(Duration::ZERO, |_, a| a.first().copied())? {
-            let Some(c) = Command::from_code(a.command) else { continue };
-            if a.status != AckStatus::Applied as u32 {
-                continue;
-            }
-            if c == Command::Stop && !interrupted {
-                stopped_at = Some(a.step);
-            }
-            if ctx.opts.announce && !interrupted {
-                eprintln!(
-                    "\ngrains: {} by a control command after step {}",
-                    match c {
-                        Command::Pause => "paused",
-                        Command::Resume => "resumed",
-                        Command::Stop => "stopping",
-                        _ => "acknowledged",
-                    },
-                    a.step
-                );
-            }
-        }
+        follow_acks(&mut ack_sub, ctx.opts.announce && !interrupted, &mut stopped_at)?;
         if let Some(b) = &mut bridge
             && let Some(how) = b.poll()
         {
@@ -458,7 +438,7 @@ fn supervise<T: Transport>(
         }
         let complete = metrics.last.is_some_and(|(s, _)| s == scene.steps);
         if parts.all_ended() && (n_spawned > 0 || complete) {
-            // Summaries sent just before the last exit are still queued.
+            // Summaries and acknowledgements sent just before the last exit are still queued.
             while let Some(s) = summary_sub.receive(WAIT, |_, s| s.first().copied())? {
                 if let Some(s) = s
                     && let Err(e) = metrics.add(&s)
@@ -466,6 +446,7 @@ fn supervise<T: Transport>(
                     failure.get_or_insert(e);
                 }
             }
+            follow_acks(&mut ack_sub, ctx.opts.announce && !interrupted, &mut stopped_at)?;
             break;
         }
     }
@@ -504,6 +485,30 @@ fn supervise<T: Transport>(
         stepping,
     };
     Ok((outcome, roster_json(&roster, &*parts, ctx)))
+}
+
+/// Applied control commands: said on stderr (if `announce`); a stop's step goes to
+/// `stopped_at`.
+fn follow_acks<S: Subscriber<Ack, StepHeader>>(acks: &mut S, announce: bool, stopped_at: &mut Option<u64>) -> anyhow::Result<()> {
+    while let Some(Some(a)) = acks.receive(Duration::ZERO, |_, a| a.first().copied())? {
+        let Some(c) = Command::from_code(a.command) else { continue };
+        if a.status != AckStatus::Applied as u32 {
+            continue;
+        }
+        if c == Command::Stop {
+            *stopped_at = Some(a.step);
+        }
+        if announce {
+            let what = match c {
+                Command::Pause => "paused",
+                Command::Resume => "resumed",
+                Command::Stop => "stopping",
+                _ => "acknowledged",
+            };
+            eprintln!("\ngrains: {what} by a control command after step {}", a.step);
+        }
+    }
+    Ok(())
 }
 
 fn roster_json(roster: &Roster, parts: &dyn Participants, ctx: &RunCtx) -> serde_json::Value {

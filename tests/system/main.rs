@@ -1,6 +1,8 @@
 //! System tests of issue 2: the real binaries, as separate processes and as threads.
 //! Build the binaries first (the README's test command does): `cargo build --release --workspace --bins`.
 
+mod bridge;
+
 use grains_system_tests::*;
 use std::time::{Duration, Instant};
 

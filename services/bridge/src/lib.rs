@@ -99,7 +99,7 @@ pub fn serve<T: Transport>(
     let mut gather = state::Gather::new(&roles);
     let mut paused = false;
     let mut seq = SEQ_BASE;
-    let mut pending: HashMap<u64, (Query, command::Checked, Instant)> = HashMap::new();
+    let mut pending = Pending::new();
     let mut published: Option<(u64, Instant)> = None;
     let mut last_dead_check = Instant::now();
     let min_interval = if cfg.rate > 0.0 {
@@ -125,18 +125,7 @@ pub fn serve<T: Transport>(
         }
 
         // Acknowledgements of our commands (and the launcher's: they change the pause state).
-        while let Some(Some(a)) = acks.receive(Duration::ZERO, |_, a| a.first().copied())? {
-            if a.status == AckStatus::Applied as u32 {
-                match Command::from_code(a.command) {
-                    Some(Command::Pause) => paused = true,
-                    Some(Command::Resume) => paused = false,
-                    _ => {}
-                }
-            }
-            if let Some((q, c, _)) = pending.remove(&a.seq) {
-                answer_ack(&q, &c, &a);
-            }
-        }
+        drain_acks(&mut acks, &mut pending, &mut paused)?;
         let now = Instant::now();
         pending.retain(|_, (q, c, since)| {
             let expired = now.duration_since(*since) > ACK_TIMEOUT;
@@ -225,6 +214,9 @@ pub fn serve<T: Transport>(
             }
         }
     }
+    // A stop's acknowledgement is sent just before the run ends, which is when we are told
+    // to stop: it is still queued.
+    drain_acks(&mut acks, &mut pending, &mut paused)?;
     for (q, c, _) in pending.into_values() {
         let _ = q
             .reply_err(error_json(&format!("{}: the bridge is shutting down", c.command.name())))
@@ -232,6 +224,25 @@ pub fn serve<T: Transport>(
     }
     drop(tokens);
     let _ = session.close().wait();
+    Ok(())
+}
+
+type Pending = HashMap<u64, (Query, command::Checked, Instant)>;
+
+/// Answers the pending commands whose acknowledgement arrived; follows the pause state.
+fn drain_acks<S: Subscriber<Ack, StepHeader>>(acks: &mut S, pending: &mut Pending, paused: &mut bool) -> anyhow::Result<()> {
+    while let Some(Some(a)) = acks.receive(Duration::ZERO, |_, a| a.first().copied())? {
+        if a.status == AckStatus::Applied as u32 {
+            match Command::from_code(a.command) {
+                Some(Command::Pause) => *paused = true,
+                Some(Command::Resume) => *paused = false,
+                _ => {}
+            }
+        }
+        if let Some((q, c, _)) = pending.remove(&a.seq) {
+            answer_ack(&q, &c, &a);
+        }
+    }
     Ok(())
 }
 

@@ -239,6 +239,9 @@ pub fn publish_summary<T: Transport>(
     Ok(())
 }
 
+/// How long the time owner keeps its ports after acknowledging a stop.
+const ACK_LINGER: Duration = Duration::from_millis(300);
+
 /// The time owner's side of the control service: commands in, acknowledgements out, and
 /// the pause state.
 pub struct RunClock<T: Transport> {
@@ -288,7 +291,13 @@ impl<T: Transport> RunClock<T> {
                         };
                     })?;
                     match Command::from_code(c.command) {
-                        Some(Command::Stop) => return Ok(false),
+                        Some(Command::Stop) => {
+                            // iceoryx2 drops a message still queued when its publisher goes
+                            // away: stay until the launcher and the bridge (which poll every
+                            // 50 and 20 ms) have taken this acknowledgement.
+                            std::thread::sleep(ACK_LINGER);
+                            return Ok(false);
+                        }
                         Some(Command::Pause) => self.paused = true,
                         Some(Command::Resume) => self.paused = false,
                         _ => {}

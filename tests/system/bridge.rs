@@ -1,0 +1,255 @@
+//! Issue 7: the zenoh bridge. Remote clients (Python from PyPI, and the Rust client behind
+//! `grains monitor/steer/runs`) watch and steer a live run; without steering, with bad
+//! commands and without credentials they change nothing; the run survives its bridge.
+
+use grains_bridge::client::{Endpoint, runs, steer};
+use grains_system_tests::*;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+const SCENE: &str = "tests/scenes/dem_small_2d.toml";
+/// Long enough to outlast any test (the tests stop these runs).
+const FOREVER: &str = "run.steps=400000";
+const NO_FRAMES: &str = "output.frames_every=0";
+
+/// A loopback endpoint on a port that was free a moment ago.
+fn free_endpoint() -> String {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    format!("tcp/127.0.0.1:{}", l.local_addr().expect("addr").port())
+}
+
+fn endpoint(connect: &str, credentials: Option<(&str, &str)>) -> Endpoint {
+    Endpoint {
+        connect: connect.to_string(),
+        credentials: credentials.map(|(u, p)| (u.to_string(), p.to_string())),
+    }
+}
+
+/// A run of [`SCENE`] with a bridge on `connect`; returns once a summary can be queried.
+fn bridged(out: &std::path::Path, connect: &str, extra: &[&str]) -> (Running, String, PathBuf) {
+    let mut args = vec![
+        "run",
+        SCENE,
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--bridge",
+        "--bridge-listen",
+        connect,
+    ];
+    args.extend_from_slice(extra);
+    let mut launcher = Running::grains(&args);
+    let err = launcher.wait_for("started the bridge", Duration::from_secs(60));
+    (launcher, run_id(&err), run_dir(&err))
+}
+
+/// Waits until the run's latest summary is reachable with `ep`; its step.
+fn wait_reachable(ep: &Endpoint, run: &str, launcher: &Running) -> u64 {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        if let Ok(list) = runs(ep, Duration::from_secs(1))
+            && let Some((_, Some(v))) = list.into_iter().find(|(id, _)| id == run)
+        {
+            return v["step"].as_u64().expect("step");
+        }
+        assert!(Instant::now() < deadline, "run {run} not reachable in 30 s: {}", launcher.stderr());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn bridge_pid(stderr: &str) -> i32 {
+    let line = stderr.lines().find(|l| l.contains("started the bridge")).expect("bridge line");
+    let at = line.find("grains-bridge (pid ").expect("bridge pid") + "grains-bridge (pid ".len();
+    line[at..at + line[at..].find(')').expect(")")].parse().expect("pid")
+}
+
+#[test]
+fn a_python_client_watches_pauses_resumes_and_stops_a_run() {
+    let _machine = machine();
+    let out = out_dir("bridge-python");
+    let connect = free_endpoint();
+    let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", FOREVER, "--set", NO_FRAMES]);
+    wait_reachable(&endpoint(&connect, None), &run, &launcher);
+
+    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
+    let client = std::process::Command::new(&python)
+        .arg(repo().join("tests/python/bridge_client.py"))
+        .args([&connect, &run])
+        .output()
+        .unwrap_or_else(|e| panic!("cannot start {python}: {e}"));
+    let said = String::from_utf8_lossy(&client.stdout).into_owned();
+    assert!(
+        client.status.success(),
+        "the Python client failed ({}):\n{said}\n{}\nlauncher:\n{}",
+        client.status,
+        String::from_utf8_lossy(&client.stderr),
+        launcher.stderr()
+    );
+    let status = launcher.wait_exit(Duration::from_secs(30));
+    assert!(status.success(), "{}", launcher.stderr());
+    // The run ended where the client's stop took effect, and says so.
+    let last: serde_json::Value = serde_json::from_str(said.lines().last().expect("result line")).expect("json");
+    let s = summary(&dir);
+    assert_eq!(s["status"], "stopped", "{s}");
+    assert_eq!(s["steps_completed"], last["stopped_at"], "{s}");
+    assert_eq!(metrics_rows(&dir).len() as u64, last["stopped_at"].as_u64().unwrap());
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// Without steering every command is refused; with steering, 100 malformed or out-of-range
+/// commands are each refused with a reason; both runs end with the same physics as a run
+/// without a bridge.
+#[test]
+fn refused_and_malformed_commands_change_nothing() {
+    let _machine = machine();
+    let out = out_dir("bridge-refused");
+    let steps = "run.steps=2500";
+    let (status, err) = {
+        let mut r = Running::grains(&[
+            "run",
+            SCENE,
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+            "--set",
+            steps,
+            "--set",
+            NO_FRAMES,
+        ]);
+        (r.wait_exit(Duration::from_secs(120)), r.stderr())
+    };
+    assert!(status.success(), "{err}");
+    let physics =
+        |dir: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
+    let reference = physics(&run_dir(&err));
+
+    // Steering off: every command, well-formed or not, is refused.
+    let connect = free_endpoint();
+    let ep = endpoint(&connect, None);
+    let (mut launcher, run, dir) = bridged(&out, &connect, &["--set", steps, "--set", NO_FRAMES]);
+    wait_reachable(&ep, &run, &launcher);
+    for c in [
+        r#"{"command":"pause"}"#,
+        r#"{"command":"stop"}"#,
+        r#"{"command":"set","key":"gravity.y","value":0}"#,
+        "junk",
+    ] {
+        let answer = steer(&ep, &run, c.as_bytes()).expect("an answer");
+        let why = answer.expect_err("steering is off: the command must be refused");
+        assert!(why.contains("steering is disabled"), "{c}: {why}");
+    }
+    assert!(launcher.wait_exit(Duration::from_secs(120)).success(), "{}", launcher.stderr());
+    assert_eq!(summary(&dir)["status"], "completed");
+    assert!(physics(&dir) == reference, "a run with refused commands differs from the reference");
+
+    // Steering on: a hundred bad commands, each answered with an error.
+    let connect = free_endpoint();
+    let ep = endpoint(&connect, None);
+    let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", steps, "--set", NO_FRAMES]);
+    wait_reachable(&ep, &run, &launcher);
+    let mut bad: Vec<Vec<u8>> = vec![
+        b"".to_vec(),
+        b"pause".to_vec(),
+        b"\xff\xfe\xfd".to_vec(),
+        b"{\"command\":\"pa\xffuse\"}".to_vec(),
+        vec![b'{'; 10 * 1024 * 1024],
+        br#"{"command":null}"#.to_vec(),
+        br#"{"command":["pause"]}"#.to_vec(),
+        br#"{"command":"pause","key":"gravity.y"}"#.to_vec(),
+        br#"{"command":"set"}"#.to_vec(),
+        br#"{"command":"set","key":"gravity.y"}"#.to_vec(),
+        br#"{"command":"set","key":"gravity.y","value":"down"}"#.to_vec(),
+        br#"{"command":"set","key":"gravity.y","value":1e300}"#.to_vec(),
+        br#"{"command":"set","key":"gravity.y","value":-101}"#.to_vec(),
+        br#"{"command":"set","key":"run.dt","value":1}"#.to_vec(),
+        br#"{"command":"stop","please":true}"#.to_vec(),
+        br#"[{"command":"stop"}]"#.to_vec(),
+    ];
+    for i in 0..42 {
+        bad.push(format!(r#"{{"command":"cmd{i}"}}"#).into_bytes());
+        bad.push(format!(r#"{{"command":"set","key":"param{i}","value":{i}}}"#).into_bytes());
+    }
+    assert_eq!(bad.len(), 100);
+    for c in &bad {
+        let answer = steer(&ep, &run, c).expect("an answer");
+        let shown = String::from_utf8_lossy(&c[..c.len().min(60)]).into_owned();
+        let why = answer.expect_err(&format!("{shown:?} must be refused"));
+        assert!(!why.is_empty(), "{shown:?}: refused without a reason");
+    }
+    assert!(launcher.wait_exit(Duration::from_secs(120)).success(), "{}", launcher.stderr());
+    assert_eq!(summary(&dir)["status"], "completed");
+    assert!(
+        physics(&dir) == reference,
+        "a run that received bad commands differs from the reference"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn killing_the_bridge_does_not_stop_the_run() {
+    let _machine = machine();
+    let out = out_dir("bridge-kill");
+    let connect = free_endpoint();
+    let (mut launcher, run, dir) = bridged(&out, &connect, &["--set", "run.steps=2500", "--set", NO_FRAMES]);
+    wait_reachable(&endpoint(&connect, None), &run, &launcher);
+    let pid = bridge_pid(&launcher.stderr());
+    // SAFETY: kill(2) on a child of our child, by pid.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(120));
+    let err = launcher.stderr();
+    assert!(status.success(), "{err}");
+    assert!(err.contains("warning: the bridge"), "the launcher must warn: {err}");
+    assert_eq!(summary(&dir)["status"], "completed");
+    assert_eq!(metrics_rows(&dir).len(), 2500);
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// With access control on: no credentials, no connection; a reader sees the state but its
+/// commands go nowhere; a steerer's command works.
+#[test]
+fn access_control_lets_in_only_the_listed_users() {
+    let _machine = machine();
+    let out = out_dir("bridge-acl");
+    let connect = free_endpoint();
+    std::fs::write(out.join("users.txt"), "viewer:look\npilot:fly\n").unwrap();
+    let settings = out.join("bridge.toml");
+    std::fs::write(
+        &settings,
+        format!(
+            "listen = [{connect:?}]\nsteering = true\n[auth]\nusers_file = \"users.txt\"\nreaders = [\"viewer\"]\nsteerers = [\"pilot\"]\n"
+        ),
+    )
+    .unwrap();
+    let (mut launcher, run, dir) = bridged(
+        &out,
+        &connect,
+        &["--bridge-config", settings.to_str().unwrap(), "--set", FOREVER, "--set", NO_FRAMES],
+    );
+    let viewer = endpoint(&connect, Some(("viewer", "look")));
+    let step = wait_reachable(&viewer, &run, &launcher);
+
+    for (who, ep) in [
+        ("no credentials", endpoint(&connect, None)),
+        ("a wrong password", endpoint(&connect, Some(("pilot", "walk")))),
+    ] {
+        assert!(
+            runs(&ep, Duration::from_secs(1)).is_err(),
+            "{who}: the bridge must refuse the connection"
+        );
+    }
+    // The reader's stop is dropped by the access control: no answer, and the run goes on.
+    assert!(
+        steer(&viewer, &run, br#"{"command":"stop"}"#).is_err(),
+        "a reader must not reach the control key"
+    );
+    let later = wait_reachable(&viewer, &run, &launcher);
+    assert!(later > step, "the run must go on (step {step} -> {later})");
+    let pilot = endpoint(&connect, Some(("pilot", "fly")));
+    let ack = steer(&pilot, &run, br#"{"command":"stop"}"#)
+        .expect("an answer")
+        .expect("a steerer may stop");
+    assert!(ack["step"].as_u64().unwrap() >= later);
+    assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
+    assert_eq!(summary(&dir)["status"], "stopped");
+    std::fs::remove_dir_all(&out).unwrap();
+}
