@@ -17,6 +17,7 @@ pub const HELLO: ServiceSpec = ServiceSpec {
     max_publishers: 8,
     max_subscribers: 1,
     buffer: 8,
+    overflow: false,
 };
 /// Launcher → participants: accepted or refused, and why. Version-independent layout.
 pub const WELCOME: ServiceSpec = ServiceSpec {
@@ -24,6 +25,7 @@ pub const WELCOME: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 8,
     buffer: 8,
+    overflow: false,
 };
 /// Launcher (later the bridge) → time owner: pause, resume, stop, snapshot, set.
 pub const CONTROL: ServiceSpec = ServiceSpec {
@@ -31,6 +33,7 @@ pub const CONTROL: ServiceSpec = ServiceSpec {
     max_publishers: 2,
     max_subscribers: 1,
     buffer: 16,
+    overflow: false,
 };
 /// Time owner → launcher and bridge: what became of each control command.
 pub const ACK: ServiceSpec = ServiceSpec {
@@ -38,6 +41,7 @@ pub const ACK: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 2,
     buffer: 16,
+    overflow: false,
 };
 /// Every participant → launcher (and the bridge): one summary per macro-step.
 pub const SUMMARY: ServiceSpec = ServiceSpec {
@@ -45,6 +49,7 @@ pub const SUMMARY: ServiceSpec = ServiceSpec {
     max_publishers: 6,
     max_subscribers: 2,
     buffer: 64,
+    overflow: false,
 };
 /// Time owner → solvers: begin macro-step n (or stop).
 pub const STEP_BEGIN: ServiceSpec = ServiceSpec {
@@ -52,6 +57,32 @@ pub const STEP_BEGIN: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 3,
     buffer: 2,
+    overflow: false,
+};
+/// Time owner → solvers of a coupled run: `snapshot` and `set` commands, applied before the
+/// step whose begin follows them.
+pub const COMMAND: ServiceSpec = ServiceSpec {
+    name: "grains/step/command",
+    max_publishers: 1,
+    max_subscribers: 3,
+    buffer: 16,
+    overflow: false,
+};
+/// DEM → bridge: a decimated view of the grains, a few times a second, latest only.
+pub const DEM_VIEW: ServiceSpec = ServiceSpec {
+    name: "grains/dem/view",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 1,
+    overflow: true,
+};
+/// MPM → bridge: a decimated view of the material points, a few times a second, latest only.
+pub const MPM_VIEW: ServiceSpec = ServiceSpec {
+    name: "grains/mpm/view",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 1,
+    overflow: true,
 };
 /// DEM → coupler: predicted momentum and mass on grid nodes.
 pub const DEM_RASTER: ServiceSpec = ServiceSpec {
@@ -59,6 +90,7 @@ pub const DEM_RASTER: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 1,
     buffer: 2,
+    overflow: false,
 };
 /// MPM → coupler: phase-1 momentum and mass on grid nodes.
 pub const MPM_RASTER: ServiceSpec = ServiceSpec {
@@ -66,6 +98,7 @@ pub const MPM_RASTER: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 1,
     buffer: 2,
+    overflow: false,
 };
 /// Coupler → DEM and MPM: constrained node velocities.
 pub const VELOCITIES: ServiceSpec = ServiceSpec {
@@ -73,6 +106,7 @@ pub const VELOCITIES: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 2,
     buffer: 2,
+    overflow: false,
 };
 /// Oracle → solvers: zone of every grid cell that changed.
 pub const ZONES: ServiceSpec = ServiceSpec {
@@ -80,6 +114,7 @@ pub const ZONES: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 2,
     buffer: 2,
+    overflow: false,
 };
 /// Oracle → DEM: grains to create.
 pub const SPAWN_GRAINS: ServiceSpec = ServiceSpec {
@@ -87,6 +122,7 @@ pub const SPAWN_GRAINS: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 1,
     buffer: 2,
+    overflow: false,
 };
 /// Oracle → MPM: material points to create.
 pub const SPAWN_POINTS: ServiceSpec = ServiceSpec {
@@ -94,6 +130,7 @@ pub const SPAWN_POINTS: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 1,
     buffer: 2,
+    overflow: false,
 };
 /// Oracle → DEM: ids of grains to delete.
 pub const DELETE_GRAINS: ServiceSpec = ServiceSpec {
@@ -101,6 +138,7 @@ pub const DELETE_GRAINS: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 1,
     buffer: 2,
+    overflow: false,
 };
 /// Oracle → MPM: ids of material points to delete.
 pub const DELETE_POINTS: ServiceSpec = ServiceSpec {
@@ -108,6 +146,7 @@ pub const DELETE_POINTS: ServiceSpec = ServiceSpec {
     max_publishers: 1,
     max_subscribers: 1,
     buffer: 2,
+    overflow: false,
 };
 
 /// A service and its quality of service. Every participant opens a service with exactly
@@ -119,14 +158,20 @@ pub struct ServiceSpec {
     pub max_subscribers: usize,
     /// Messages a subscriber may have queued per publisher before the publisher waits.
     pub buffer: usize,
+    /// Instead of waiting, the publisher overwrites the oldest queued message (views for
+    /// remote viewers: a slow reader must never hold up a solver).
+    pub overflow: bool,
 }
 
 /// Every service of a run, for the spec and for cleanup.
-pub const ALL: [ServiceSpec; 14] = [
+pub const ALL: [ServiceSpec; 17] = [
     HELLO,
     WELCOME,
     CONTROL,
     ACK,
+    COMMAND,
+    DEM_VIEW,
+    MPM_VIEW,
     SUMMARY,
     STEP_BEGIN,
     DEM_RASTER,

@@ -299,6 +299,51 @@ wire_type! {
     }
 }
 
+/// Parameters a `set` command may change: [`Control::key`] codes, names as remote clients
+/// spell them, and the values allowed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Param {
+    GravityX = 1,
+    GravityY = 2,
+    GravityZ = 3,
+}
+
+impl Param {
+    pub const ALL: [Param; 3] = [Param::GravityX, Param::GravityY, Param::GravityZ];
+
+    pub fn from_code(code: u32) -> Option<Param> {
+        Param::ALL.into_iter().find(|p| *p as u32 == code)
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Param::GravityX => "gravity.x",
+            Param::GravityY => "gravity.y",
+            Param::GravityZ => "gravity.z",
+        }
+    }
+
+    /// Allowed values (inclusive) and their unit.
+    pub fn range(self) -> (f64, f64, &'static str) {
+        (-100.0, 100.0, "m/s²")
+    }
+}
+
+wire_type! {
+    /// One grain or material point of a view for remote viewers (DEM or MPM → bridge on
+    /// [`crate::names::DEM_VIEW`] / [`crate::names::MPM_VIEW`]). 64 bytes. The header's
+    /// `flags` holds the solver's total count (the view is every k-th item).
+    "grains.ViewPoint.v1",
+    pub struct ViewPoint {
+        pub id: u64,
+        pub position: [f64; 3],
+        pub velocity: [f64; 3],
+        /// Radius of a grain; half the spacing of a material point [m].
+        pub size: f64,
+    }
+}
+
 /// [`Ack::status`] codes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]

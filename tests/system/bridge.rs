@@ -253,3 +253,139 @@ fn access_control_lets_in_only_the_listed_users() {
     assert_eq!(summary(&dir)["status"], "stopped");
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// `snapshot` writes a frame at the acknowledged step, in a DEM run (the DEM owns time) and in
+/// a hybrid run (the coupler forwards it to both solvers); `set gravity.y` turns gravity
+/// upward from the acknowledged step on: the grains' momentum then grows upward.
+#[test]
+fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
+    let _machine = machine();
+    let out = out_dir("bridge-commands");
+    let connect = free_endpoint();
+    let ep = endpoint(&connect, None);
+    let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", FOREVER, "--set", NO_FRAMES]);
+    wait_reachable(&ep, &run, &launcher);
+    let ack = |c: &str| -> u64 {
+        let a = steer(&ep, &run, c.as_bytes())
+            .expect("an answer")
+            .unwrap_or_else(|e| panic!("{c}: {e}"));
+        a["step"].as_u64().expect("step")
+    };
+    let s = ack(r#"{"command":"snapshot"}"#);
+    assert!(dir.join(format!("frames/grains_{s:08}.vtu")).is_file(), "no frame at step {s}");
+    let refused = steer(&ep, &run, br#"{"command":"set","key":"gravity.z","value":1}"#).expect("an answer");
+    assert!(refused.is_err(), "gravity.z in a 2D run must be refused: {refused:?}");
+    let g = ack(r#"{"command":"set","key":"gravity.y","value":9.81}"#);
+    std::thread::sleep(Duration::from_millis(500));
+    ack(r#"{"command":"stop"}"#);
+    assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
+    let (py, mass, time) = (column(&dir, "dem_py"), column(&dir, "dem_mass"), column(&dir, "time"));
+    let at = |k: u64| {
+        (
+            py[k as usize - 1].parse::<f64>().unwrap(),
+            time[k as usize - 1].parse::<f64>().unwrap(),
+        )
+    };
+    let m: f64 = mass[0].parse().unwrap();
+    let ((p0, t0), (p1, t1)) = (at(g), at(g + 20));
+    // Upward gravity and a floor that no longer pushes: dp/dt = m g (Newton), at least half
+    // of it while the grains unload.
+    assert!(
+        p1 - p0 > 0.5 * m * 9.81 * (t1 - t0),
+        "py {p0} -> {p1} over {} s (m = {m} kg)",
+        t1 - t0
+    );
+
+    // Hybrid: the coupler forwards the snapshot; both solvers write a frame at that step.
+    let connect = free_endpoint();
+    let ep = endpoint(&connect, None);
+    let mut args = vec![
+        "run",
+        "tests/scenes/hybrid_small_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--bridge",
+    ];
+    args.extend(["--bridge-listen", &connect, "--steering", "--set", FOREVER, "--set", NO_FRAMES]);
+    let mut launcher = Running::grains(&args);
+    let err = launcher.wait_for("started the bridge", Duration::from_secs(60));
+    let (run, dir) = (run_id(&err), run_dir(&err));
+    wait_reachable(&ep, &run, &launcher);
+    let a = steer(&ep, &run, br#"{"command":"snapshot"}"#)
+        .expect("an answer")
+        .expect("snapshot");
+    let s = a["step"].as_u64().unwrap();
+    steer(&ep, &run, br#"{"command":"stop"}"#).expect("an answer").expect("stop");
+    assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
+    for solver in ["grains", "points"] {
+        assert!(
+            dir.join(format!("frames/{solver}_{s:08}.vtu")).is_file(),
+            "no {solver} frame at step {s}"
+        );
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A remote client that subscribes to the views and never reads them
+/// (`tests/python/stalled_viewer.py`) does not slow the run by more than 5% (issue 7): the same
+/// run with and without such a client, alternating, fastest of three each (the machine is
+/// shared: the fastest run is the least disturbed).
+#[test]
+fn a_client_that_never_reads_views_does_not_slow_the_run() {
+    use std::io::BufRead;
+    let _machine = machine();
+    let out = out_dir("bridge-slow");
+    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
+    let wall = |stalled: bool| -> f64 {
+        let connect = free_endpoint();
+        // 4,824 grains: every view (all of them, 5 a second, ~340 kB of JSON) soon fills what
+        // the sockets and zenoh buffer for a client that does not read.
+        let big = [
+            "--set",
+            "domain.max=[0.12,0.06]",
+            "--set",
+            "body.0.max=[0.12,0.05]",
+            "--set",
+            "wall.0.max=[0.12,0.06]",
+            "--set",
+            "coupling.substeps=20",
+            "--set",
+            "run.steps=1000",
+            "--set",
+            NO_FRAMES,
+        ];
+        let (mut launcher, run, dir) = bridged(&out, &connect, &big);
+        wait_reachable(&endpoint(&connect, None), &run, &launcher);
+        let viewer = stalled.then(|| {
+            let mut child = std::process::Command::new(&python)
+                .arg(repo().join("tests/python/stalled_viewer.py"))
+                .args([&connect, &run])
+                .stdout(std::process::Stdio::piped())
+                .spawn()
+                .unwrap_or_else(|e| panic!("cannot start {python}: {e}"));
+            let mut line = String::new();
+            let stdout = child.stdout.take().expect("piped");
+            std::io::BufReader::new(stdout).read_line(&mut line).expect("viewer output");
+            assert_eq!(line.trim(), "subscribed", "the viewer did not subscribe");
+            child
+        });
+        assert!(launcher.wait_exit(Duration::from_secs(120)).success(), "{}", launcher.stderr());
+        if let Some(mut v) = viewer {
+            let _ = v.kill();
+            let _ = v.wait();
+        }
+        summary(&dir)["wall_time_s"].as_f64().expect("wall time")
+    };
+    let (mut free, mut stalled) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..3 {
+        free = free.min(wall(false));
+        stalled = stalled.min(wall(true));
+    }
+    eprintln!("1000 steps of 4,824 grains: {free:.3} s without a client, {stalled:.3} s with a client that never reads (fastest of 3)");
+    assert!(
+        stalled <= 1.05 * free,
+        "{stalled:.3} s vs {free:.3} s: the stalled client slowed the run by more than 5%"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}

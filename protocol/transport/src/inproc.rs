@@ -83,6 +83,8 @@ impl<E, H> Drop for Message<E, H> {
 
 pub struct InProcPublisher<E, H> {
     channel: Arc<Channel<E, H>>,
+    /// Queue length at which the oldest message is dropped (overflow services).
+    cap: Option<usize>,
 }
 
 pub struct InProcSubscriber<E, H> {
@@ -125,7 +127,10 @@ impl crate::Transport for InProc {
         }
         *n += 1;
         drop(n);
-        Ok(InProcPublisher { channel })
+        Ok(InProcPublisher {
+            channel,
+            cap: spec.overflow.then_some(spec.buffer),
+        })
     }
 
     fn subscriber<E: Pod + crate::ZeroCopy, H: Pod + crate::ZeroCopy>(
@@ -167,7 +172,12 @@ impl<E: Pod, H: Pod> crate::Publisher<E, H> for InProcPublisher<E, H> {
         });
         let subs = self.channel.subscribers.lock().expect("lock").clone();
         for queue in subs {
-            queue.messages.lock().expect("queue lock").push_back(message.clone());
+            let mut messages = queue.messages.lock().expect("queue lock");
+            if self.cap.is_some_and(|cap| messages.len() >= cap) {
+                messages.pop_front();
+            }
+            messages.push_back(message.clone());
+            drop(messages);
             queue.ready.notify_all();
         }
         Ok(())

@@ -77,7 +77,7 @@ impl Iceoryx2 {
             .subscriber_max_buffer_size(spec.buffer)
             .subscriber_max_borrowed_samples(1)
             .history_size(0)
-            .enable_safe_overflow(false)
+            .enable_safe_overflow(spec.overflow)
             .open_or_create()
             .map_err(|e| open_err(spec.name, e))
     }
@@ -119,12 +119,16 @@ impl crate::Transport for Iceoryx2 {
     ) -> Result<Self::Publisher<E, H>, TransportError> {
         let service = self.pubsub::<E, H>(spec)?;
         let event = self.event(spec)?;
+        let backpressure = match spec.overflow {
+            true => BackpressureStrategy::DiscardData,
+            false => BackpressureStrategy::RetryUntilDelivered,
+        };
         let publisher = service
             .publisher_builder()
             .initial_max_slice_len(initial_len.max(1))
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .max_loaned_samples(1)
-            .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+            .backpressure_strategy(backpressure)
             .create()
             .map_err(|e| open_err(spec.name, e))?;
         let notifier = event.notifier_builder().create().map_err(|e| open_err(spec.name, e))?;

@@ -39,6 +39,7 @@ unsafe impl Pod for SpawnPoint {}
 unsafe impl Pod for Summary {}
 unsafe impl Pod for Control {}
 unsafe impl Pod for Ack {}
+unsafe impl Pod for ViewPoint {}
 unsafe impl Pod for u64 {}
 unsafe impl Pod for () {}
 

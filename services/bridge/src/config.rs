@@ -16,6 +16,10 @@ pub mod keys {
     pub fn config(run: &str) -> String {
         format!("grains/{run}/state/config")
     }
+    /// Decimated view of a solver's grains or points (`dem`, `mpm`).
+    pub fn view(run: &str, role: &str) -> String {
+        format!("grains/{run}/state/view/{role}")
+    }
     pub fn state_all(run: &str) -> String {
         format!("grains/{run}/state/**")
     }
@@ -204,6 +208,7 @@ impl BridgeConfig {
                 "summary": keys::summary(run),
                 "config": keys::config(run),
                 "control": keys::control(run),
+                "views": keys::view(run, "*"),
                 "alive": keys::alive(run, "*"),
             },
         })

@@ -1,8 +1,9 @@
 //! The zenoh bridge of a run: the only door to a run from outside.
 //!
 //! Out: the participants' summaries, gathered per macro-step, on `grains/<run>/state/summary`
-//! (at most `rate` per second, dropped rather than queued for slow clients), the latest of
-//! each under the queryable `grains/<run>/state/**`, and liveliness tokens
+//! (at most `rate` per second), the solvers' decimated views on `grains/<run>/state/view/<role>`
+//! (a few per second; both dropped rather than queued for slow clients), the latest of each
+//! under the queryable `grains/<run>/state/**`, and liveliness tokens
 //! `grains/<run>/alive/<bridge|dem|mpm|…>`. In: commands as queries on `grains/<run>/control`
 //! (only with steering on), checked ([`command`]), sent to the time owner over the control
 //! service and answered with its acknowledgement: the step at which the command took effect,
@@ -19,7 +20,7 @@ pub mod state;
 
 use anyhow::Context;
 use config::{BridgeConfig, keys};
-use grains_protocol::wire::{Ack, AckStatus, Command, Control, StepHeader, Summary};
+use grains_protocol::wire::{Ack, AckStatus, Command, Control, StepHeader, Summary, ViewPoint};
 use grains_protocol::{PROTOCOL_VERSION, Role, names, run_id_bytes, scene::Scene};
 use grains_service::signals::StopFlag;
 use grains_transport::{Publisher, Subscriber, Transport};
@@ -42,6 +43,10 @@ enum Incoming {
 
 /// Serves run `run` until `stop` trips. `out_dir`, if given, receives `bridge.json` (the
 /// effective settings).
+///
+/// This thread only talks to the run (iceoryx2) and never waits on a client: everything that
+/// goes out over zenoh is handed to an outbox thread, which sends the latest summary and view
+/// of each solver (older ones are skipped if it falls behind) and every reply.
 pub fn serve<T: Transport>(
     t: &T,
     cfg: &BridgeConfig,
@@ -58,6 +63,14 @@ pub fn serve<T: Transport>(
         true => Some(t.publisher::<Control, StepHeader>(&names::CONTROL, 1)?),
         false => None,
     };
+    // Views of the solvers of this run (a DEM-only run has no MPM view).
+    let roles = scene.participants();
+    let mut views = Vec::new();
+    for (role, spec) in [(Role::Dem, names::DEM_VIEW), (Role::Mpm, names::MPM_VIEW)] {
+        if roles.contains(&role) {
+            views.push((role, t.subscriber::<ViewPoint, StepHeader>(&spec)?));
+        }
+    }
 
     let effective = cfg.effective(run);
     eprintln!("grains-bridge: run {run}: {effective}");
@@ -68,10 +81,6 @@ pub fn serve<T: Transport>(
     let session = zenoh::open(cfg.zenoh(run)?)
         .wait()
         .map_err(|e| anyhow::anyhow!("grains-bridge: cannot open zenoh on {:?}: {e}", cfg.listen))?;
-    let summary_pub = session
-        .declare_publisher(keys::summary(run))
-        .wait()
-        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::summary(run)))?;
     let (tx, rx) = mpsc::channel();
     let tx_state = tx.clone();
     let _state_q = session
@@ -88,149 +97,258 @@ pub fn serve<T: Transport>(
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::control(run)))?;
-    let liveliness = session.liveliness();
-    let _bridge_token = liveliness
-        .declare_token(keys::alive(run, "bridge"))
-        .wait()
-        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::alive(run, "bridge")))?;
-    let mut tokens: HashMap<Role, zenoh::liveliness::LivelinessToken> = HashMap::new();
+    let view_roles: Vec<Role> = views.iter().map(|(r, _)| *r).collect();
+    let outbox = Outbox::open(&session, run, &view_roles)?;
+    let (out_tx, out_rx) = mpsc::channel::<Out>();
 
-    let roles = scene.participants();
-    let mut gather = state::Gather::new(&roles);
-    let mut paused = false;
-    let mut seq = SEQ_BASE;
-    let mut pending = Pending::new();
-    let mut published: Option<(u64, Instant)> = None;
-    let mut last_dead_check = Instant::now();
-    let min_interval = if cfg.rate > 0.0 {
-        Duration::from_secs_f64(1.0 / cfg.rate)
-    } else {
-        Duration::ZERO
-    };
-    let doc = |gather: &state::Gather, paused: bool| gather.document(run, &scene.name, scene.steps, paused);
+    std::thread::scope(|scope| -> anyhow::Result<()> {
+        let sender = scope.spawn(move || outbox.run(out_rx));
+        let out = |o: Out| {
+            let _ = out_tx.send(o);
+        };
+        let mut alive: Vec<Role> = Vec::new();
+        let mut latest_views: HashMap<Role, serde_json::Value> = HashMap::new();
+        let mut gather = state::Gather::new(&roles);
+        let mut paused = false;
+        let mut seq = SEQ_BASE;
+        let mut pending = Pending::new();
+        let mut published: Option<(u64, Instant)> = None;
+        let mut last_dead_check = Instant::now();
+        let min_interval = if cfg.rate > 0.0 {
+            Duration::from_secs_f64(1.0 / cfg.rate)
+        } else {
+            Duration::ZERO
+        };
+        let doc = |gather: &state::Gather, paused: bool| gather.document(run, &scene.name, scene.steps, paused);
 
-    while !stop.is_set() {
-        // Summaries: wait up to 20 ms for one, then drain.
-        let mut timeout = Duration::from_millis(20);
-        while let Some(s) = summaries.receive(timeout, |_, s| s.first().copied())? {
-            timeout = Duration::ZERO;
-            let Some(s) = s else { continue };
-            if let Some(role) = Role::from_code(s.role)
-                && !tokens.contains_key(&role)
-                && let Ok(token) = liveliness.declare_token(keys::alive(run, role.name())).wait()
-            {
-                tokens.insert(role, token);
+        while !stop.is_set() {
+            // Summaries: wait up to 20 ms for one, then drain.
+            let mut timeout = Duration::from_millis(20);
+            while let Some(s) = summaries.receive(timeout, |_, s| s.first().copied())? {
+                timeout = Duration::ZERO;
+                let Some(s) = s else { continue };
+                if let Some(role) = Role::from_code(s.role)
+                    && !alive.contains(&role)
+                {
+                    alive.push(role);
+                    out(Out::Alive(role, true));
+                }
+                gather.add(s);
             }
-            gather.add(s);
-        }
 
-        // Acknowledgements of our commands (and the launcher's: they change the pause state).
-        drain_acks(&mut acks, &mut pending, &mut paused)?;
-        let now = Instant::now();
-        pending.retain(|_, (q, c, since)| {
-            let expired = now.duration_since(*since) > ACK_TIMEOUT;
-            if expired {
-                let why = format!(
-                    "{}: no acknowledgement from the time owner within {} s (the run may have ended)",
-                    c.command.name(),
-                    ACK_TIMEOUT.as_secs()
-                );
-                let _ = q.reply_err(error_json(&why)).wait();
+            // Views: the latest of each solver.
+            for (role, sub) in &mut views {
+                while let Some(v) = sub.receive(Duration::ZERO, |h, pts| state::view_document(run, *role, h, pts))? {
+                    out(Out::View(*role, v.to_string()));
+                    latest_views.insert(*role, v);
+                }
             }
-            !expired
-        });
 
-        // Queries from clients.
-        while let Ok(incoming) = rx.try_recv() {
-            match incoming {
-                Incoming::State(q) => {
-                    for (key, value) in [
-                        (keys::summary(run), doc(&gather, paused)),
-                        (keys::config(run), Some(effective.clone())),
-                    ] {
-                        let Some(value) = value else { continue };
-                        let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key.as_str()) else {
+            // Acknowledgements of our commands (and the launcher's: they change the pause state).
+            drain_acks(&mut acks, &mut pending, &mut paused, &out)?;
+            let now = Instant::now();
+            pending.retain(|_, (q, c, since)| {
+                let expired = now.duration_since(*since) > ACK_TIMEOUT;
+                if expired {
+                    let why = format!(
+                        "{}: no acknowledgement from the time owner within {} s (the run may have ended)",
+                        c.command.name(),
+                        ACK_TIMEOUT.as_secs()
+                    );
+                    out(Out::Error(q.clone(), error_json(&why)));
+                }
+                !expired
+            });
+
+            // Queries from clients.
+            while let Ok(incoming) = rx.try_recv() {
+                match incoming {
+                    Incoming::State(q) => {
+                        let mut answers = vec![
+                            (keys::summary(run), doc(&gather, paused)),
+                            (keys::config(run), Some(effective.clone())),
+                        ];
+                        answers.extend(latest_views.iter().map(|(role, v)| (keys::view(run, role.name()), Some(v.clone()))));
+                        for (key, value) in answers {
+                            let Some(value) = value else { continue };
+                            if let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key.as_str())
+                                && q.key_expr().intersects(&k)
+                            {
+                                out(Out::Reply(q.clone(), key, value.to_string()));
+                            }
+                        }
+                    }
+                    Incoming::Control(q) => {
+                        let payload = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
+                        let Some(control) = control.as_mut() else {
+                            let why = "steering is disabled for this run: every command is refused (start it with grains run --bridge --steering)";
+                            out(Out::Error(q, error_json(why)));
                             continue;
                         };
-                        if q.key_expr().intersects(&k) {
-                            let _ = q.reply(k, value.to_string()).wait();
-                        }
-                    }
-                }
-                Incoming::Control(q) => {
-                    let payload = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
-                    let Some(control) = control.as_mut() else {
-                        let _ = q
-                            .reply_err(error_json(
-                                "steering is disabled for this run: every command is refused (start it with grains run --bridge --steering)",
-                            ))
-                            .wait();
-                        continue;
-                    };
-                    match command::parse(&payload) {
-                        Err(why) => {
-                            let _ = q.reply_err(error_json(&why)).wait();
-                        }
-                        Ok(c) => {
-                            seq += 1;
-                            let header = StepHeader {
-                                protocol_version: PROTOCOL_VERSION,
-                                sender: Role::Bridge as u32,
-                                step: gather.latest_step().unwrap_or(0),
-                                run_id: run_id_bytes(run),
-                                ..StepHeader::default()
-                            };
-                            let msg = Control {
-                                seq,
-                                command: c.command as u32,
-                                key: c.key,
-                                value: c.value,
-                            };
-                            control.publish(1, |h, out| {
-                                *h = header;
-                                out[0] = msg;
-                            })?;
-                            pending.insert(seq, (q, c, Instant::now()));
+                        match command::parse(&payload) {
+                            Err(why) => out(Out::Error(q, error_json(&why))),
+                            Ok(c) => {
+                                seq += 1;
+                                let header = StepHeader {
+                                    protocol_version: PROTOCOL_VERSION,
+                                    sender: Role::Bridge as u32,
+                                    step: gather.latest_step().unwrap_or(0),
+                                    run_id: run_id_bytes(run),
+                                    ..StepHeader::default()
+                                };
+                                let msg = Control {
+                                    seq,
+                                    command: c.command as u32,
+                                    key: c.key,
+                                    value: c.value,
+                                };
+                                control.publish(1, |h, out| {
+                                    *h = header;
+                                    out[0] = msg;
+                                })?;
+                                pending.insert(seq, (q, c, Instant::now()));
+                            }
                         }
                     }
                 }
             }
-        }
 
-        // The latest complete step, at most `rate` times a second.
-        if let Some(step) = gather.latest_step()
-            && published.is_none_or(|(s, at)| s < step && at.elapsed() >= min_interval)
-            && let Some(d) = doc(&gather, paused)
-        {
-            let _ = summary_pub.put(d.to_string()).wait();
-            published = Some((step, Instant::now()));
-        }
+            // The latest complete step, at most `rate` times a second.
+            if let Some(step) = gather.latest_step()
+                && published.is_none_or(|(s, at)| s < step && at.elapsed() >= min_interval)
+                && let Some(d) = doc(&gather, paused)
+            {
+                out(Out::Summary(d.to_string()));
+                published = Some((step, Instant::now()));
+            }
 
-        // Participants that died lose their token.
-        if last_dead_check.elapsed() > Duration::from_millis(500) {
-            last_dead_check = Instant::now();
-            for dead in t.dead_peers() {
-                tokens.retain(|role, _| !dead.starts_with(&format!("{} ", role.binary())));
+            // Participants that died lose their token.
+            if last_dead_check.elapsed() > Duration::from_millis(500) {
+                last_dead_check = Instant::now();
+                for dead in t.dead_peers() {
+                    alive.retain(|role| {
+                        let gone = dead.starts_with(&format!("{} ", role.binary()));
+                        if gone {
+                            out(Out::Alive(*role, false));
+                        }
+                        !gone
+                    });
+                }
             }
         }
-    }
-    // A stop's acknowledgement is sent just before the run ends, which is when we are told
-    // to stop: it is still queued.
-    drain_acks(&mut acks, &mut pending, &mut paused)?;
-    for (q, c, _) in pending.into_values() {
-        let _ = q
-            .reply_err(error_json(&format!("{}: the bridge is shutting down", c.command.name())))
-            .wait();
-    }
-    drop(tokens);
+        // A stop's acknowledgement is sent just before the run ends, which is when we are
+        // told to stop: it is still queued.
+        drain_acks(&mut acks, &mut pending, &mut paused, &out)?;
+        for (q, c, _) in pending.into_values() {
+            out(Out::Error(
+                q,
+                error_json(&format!("{}: the bridge is shutting down", c.command.name())),
+            ));
+        }
+        drop(out_tx);
+        sender.join().map_err(|_| anyhow::anyhow!("the bridge's outbox thread panicked"))?;
+        Ok(())
+    })?;
     let _ = session.close().wait();
     Ok(())
+}
+
+/// What goes out over zenoh.
+enum Out {
+    Summary(String),
+    View(Role, String),
+    Reply(Query, String, String),
+    Error(Query, String),
+    /// A participant's liveliness token: declare (true) or drop (false).
+    Alive(Role, bool),
+}
+
+/// The zenoh side of the bridge: publishers and tokens, fed by [`Out`] messages.
+struct Outbox {
+    session: zenoh::Session,
+    run: String,
+    summary: zenoh::pubsub::Publisher<'static>,
+    views: HashMap<Role, zenoh::pubsub::Publisher<'static>>,
+    _bridge_token: zenoh::liveliness::LivelinessToken,
+}
+
+impl Outbox {
+    fn open(session: &zenoh::Session, run: &str, view_roles: &[Role]) -> anyhow::Result<Self> {
+        let publisher = |key: String| {
+            session
+                .declare_publisher(key.clone())
+                .congestion_control(zenoh::qos::CongestionControl::Drop)
+                .wait()
+                .map_err(|e| anyhow::anyhow!("declaring {key}: {e}"))
+        };
+        let mut views = HashMap::new();
+        for role in view_roles {
+            views.insert(*role, publisher(keys::view(run, role.name()))?);
+        }
+        let token = session
+            .liveliness()
+            .declare_token(keys::alive(run, "bridge"))
+            .wait()
+            .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::alive(run, "bridge")))?;
+        Ok(Outbox {
+            session: session.clone(),
+            run: run.to_string(),
+            summary: publisher(keys::summary(run))?,
+            views,
+            _bridge_token: token,
+        })
+    }
+
+    /// Sends until the channel closes. Of the summaries and views queued meanwhile only the
+    /// latest of each goes out; every reply goes out, in order.
+    fn run(self, rx: mpsc::Receiver<Out>) {
+        let mut tokens: HashMap<Role, zenoh::liveliness::LivelinessToken> = HashMap::new();
+        while let Ok(first) = rx.recv() {
+            let mut summary = None;
+            let mut views: HashMap<Role, String> = HashMap::new();
+            for o in std::iter::once(first).chain(rx.try_iter()) {
+                match o {
+                    Out::Summary(s) => summary = Some(s),
+                    Out::View(role, v) => {
+                        views.insert(role, v);
+                    }
+                    Out::Reply(q, key, body) => {
+                        let _ = q.reply(key, body).wait();
+                    }
+                    Out::Error(q, body) => {
+                        let _ = q.reply_err(body).wait();
+                    }
+                    Out::Alive(role, true) => {
+                        if let Ok(t) = self.session.liveliness().declare_token(keys::alive(&self.run, role.name())).wait() {
+                            tokens.insert(role, t);
+                        }
+                    }
+                    Out::Alive(role, false) => {
+                        tokens.remove(&role);
+                    }
+                }
+            }
+            if let Some(s) = summary {
+                let _ = self.summary.put(s).wait();
+            }
+            for (role, v) in views {
+                if let Some(p) = self.views.get(&role) {
+                    let _ = p.put(v).wait();
+                }
+            }
+        }
+    }
 }
 
 type Pending = HashMap<u64, (Query, command::Checked, Instant)>;
 
 /// Answers the pending commands whose acknowledgement arrived; follows the pause state.
-fn drain_acks<S: Subscriber<Ack, StepHeader>>(acks: &mut S, pending: &mut Pending, paused: &mut bool) -> anyhow::Result<()> {
+fn drain_acks<S: Subscriber<Ack, StepHeader>>(
+    acks: &mut S,
+    pending: &mut Pending,
+    paused: &mut bool,
+    out: &impl Fn(Out),
+) -> anyhow::Result<()> {
     while let Some(Some(a)) = acks.receive(Duration::ZERO, |_, a| a.first().copied())? {
         if a.status == AckStatus::Applied as u32 {
             match Command::from_code(a.command) {
@@ -240,7 +358,7 @@ fn drain_acks<S: Subscriber<Ack, StepHeader>>(acks: &mut S, pending: &mut Pendin
             }
         }
         if let Some((q, c, _)) = pending.remove(&a.seq) {
-            answer_ack(&q, &c, &a);
+            out(answer_ack(q, &c, &a));
         }
     }
     Ok(())
@@ -250,17 +368,16 @@ fn error_json(why: &str) -> String {
     serde_json::json!({ "ok": false, "error": why }).to_string()
 }
 
-/// Answers a command query with the time owner's acknowledgement.
-fn answer_ack(q: &Query, c: &command::Checked, a: &Ack) {
-    let applied = a.status == AckStatus::Applied as u32;
-    if applied {
+/// The answer to a command query from the time owner's acknowledgement.
+fn answer_ack(q: Query, c: &command::Checked, a: &Ack) -> Out {
+    if a.status == AckStatus::Applied as u32 {
         let body = serde_json::json!({ "ok": true, "command": c.command.name(), "step": a.step, "seq": a.seq });
-        let _ = q.reply(q.key_expr().clone(), body.to_string()).wait();
-        return;
+        let key = q.key_expr().to_string();
+        return Out::Reply(q, key, body.to_string());
     }
     let why = match AckStatus::from_code(a.status) {
         Some(AckStatus::Unsupported) => format!(
-            "{}: refused by the time owner at step {}: this build's participants cannot carry it out during a run yet",
+            "{}: refused by the run at step {}: its solvers cannot carry it out (a parameter of an axis the run does not have, or no output directory for a snapshot)",
             c.command.name(),
             a.step
         ),
@@ -271,5 +388,5 @@ fn answer_ack(q: &Query, c: &command::Checked, a: &Ack) {
             a.status
         ),
     };
-    let _ = q.reply_err(error_json(&why)).wait();
+    Out::Error(q, error_json(&why))
 }

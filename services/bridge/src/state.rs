@@ -2,7 +2,7 @@
 //! into one JSON document per macro-step.
 
 use grains_protocol::Role;
-use grains_protocol::wire::Summary;
+use grains_protocol::wire::{StepHeader, Summary, ViewPoint};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -127,6 +127,24 @@ pub fn document(list: &[Summary], run_id: &str, scene: &str, steps: u64, paused:
         "momentum": momentum,
         "steps_per_s": steps_per_s,
         "participants": participants,
+    })
+}
+
+/// A solver's view (decimated grains or points) as JSON: positions, velocities and sizes in
+/// single precision (enough to draw), the step, and how many the solver has in all.
+pub fn view_document(run: &str, role: Role, header: &StepHeader, points: &[ViewPoint]) -> Value {
+    let f32s = |a: &[f64; 3]| [a[0] as f32, a[1] as f32, a[2] as f32];
+    json!({
+        "run": run,
+        "role": role.name(),
+        "step": header.step,
+        "time": header.time,
+        "total": header.flags,
+        "count": points.len(),
+        "id": points.iter().map(|p| p.id).collect::<Vec<_>>(),
+        "position": points.iter().map(|p| f32s(&p.position)).collect::<Vec<_>>(),
+        "velocity": points.iter().map(|p| f32s(&p.velocity)).collect::<Vec<_>>(),
+        "size": points.iter().map(|p| p.size as f32).collect::<Vec<_>>(),
     })
 }
 

@@ -8,7 +8,7 @@ use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{
-    Ack, AckStatus, Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ZoneCell,
+    Ack, AckStatus, Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
 };
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -64,6 +64,71 @@ pub trait Solver {
     fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()>;
     /// State after the last step.
     fn report(&self) -> SolverReport;
+    /// A view for remote viewers: at most `max` items (every k-th) into `out`; returns the
+    /// total count.
+    fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
+        let _ = (max, out);
+        0
+    }
+    /// A `snapshot` or `set` command, between steps (after step `done`); why not, if it
+    /// cannot be carried out.
+    fn command(&mut self, done: u64, c: &Control) -> Result<(), String> {
+        let _ = (done, c);
+        Err("this solver takes no commands".into())
+    }
+}
+
+/// Views for remote viewers: at most this often, and at most this many items.
+pub const VIEW_PERIOD: Duration = Duration::from_millis(200);
+pub const VIEW_MAX: usize = 5000;
+
+/// A solver's view publisher: a few times a second, only while someone (the bridge) listens;
+/// the service overwrites an unread view, so a slow reader never holds the solver up.
+pub struct Viewer<T: Transport> {
+    publisher: T::Publisher<ViewPoint, StepHeader>,
+    last: Option<Instant>,
+    buf: Vec<ViewPoint>,
+}
+
+impl<T: Transport> Viewer<T> {
+    pub fn open(session: &Session<'_, T>) -> anyhow::Result<Option<Self>> {
+        let spec = match session.role {
+            Role::Dem => names::DEM_VIEW,
+            Role::Mpm => names::MPM_VIEW,
+            _ => return Ok(None),
+        };
+        Ok(Some(Viewer {
+            publisher: session.publisher(&spec, 1)?,
+            last: None,
+            buf: Vec::new(),
+        }))
+    }
+
+    /// Publishes a view of `solver` after `window` if one is due and someone listens.
+    pub fn offer<S: Solver>(&mut self, session: &Session<'_, T>, window: &StepWindow, solver: &S) -> anyhow::Result<()> {
+        if self.last.is_some_and(|t| t.elapsed() < VIEW_PERIOD) {
+            return Ok(());
+        }
+        self.last = Some(Instant::now());
+        if self.publisher.subscriber_count() == 0 {
+            return Ok(());
+        }
+        self.buf.clear();
+        let total = solver.view(VIEW_MAX, &mut self.buf);
+        let mut header = session.header(window.step, window.time + window.dt, window.dt);
+        header.flags = total;
+        let buf = &self.buf;
+        self.publisher.publish(buf.len(), |h, out| {
+            *h = header;
+            out.copy_from_slice(buf);
+        })?;
+        Ok(())
+    }
+}
+
+/// Every k-th of `n` items so that at most `max` remain (for [`Solver::view`]).
+pub fn view_stride(n: usize, max: usize) -> usize {
+    n.div_ceil(max.max(1)).max(1)
 }
 
 /// Participant options that do not come from the scene.
@@ -101,12 +166,15 @@ pub fn run<T: Transport, S: Solver>(
     let mut vel_sub = session.subscriber::<NodeVelocity, StepHeader>(&names::VELOCITIES)?;
     let mut raster_pub = session.publisher::<RasterNode, StepHeader>(&raster_spec, 1024)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+    let mut command_sub = session.subscriber::<Control, StepHeader>(&names::COMMAND)?;
+    let mut viewer = Viewer::open(&session)?;
     let mut zones_sub = match scene.participants().contains(&Role::Oracle) {
         true => Some(session.subscriber::<ZoneCell, StepHeader>(&names::ZONES)?),
         false => None,
     };
     session.wait_until("the coupler, the oracle and the launcher", |_| {
         step_sub.publisher_count() >= 1
+            && command_sub.publisher_count() >= 1
             && vel_sub.publisher_count() >= 1
             && raster_pub.subscriber_count() >= 1
             && summary_pub.subscriber_count() >= 1
@@ -130,6 +198,12 @@ pub fn run<T: Transport, S: Solver>(
         };
         let mut wait = wait_start.elapsed();
         let compute_start = Instant::now();
+        // Commands the time owner accepted after the previous step (sent before this begin).
+        while let Some(Some(c)) = command_sub.receive(Duration::ZERO, |_, c| c.first().copied())? {
+            if let Err(why) = solver.command(window.step - 1, &c) {
+                eprintln!("{}: warning: command {} not carried out: {why}", session.role.binary(), c.command);
+            }
+        }
 
         let n = solver.predict(&window)?;
         let header = session.header(window.step, window.time, window.dt);
@@ -159,6 +233,9 @@ pub fn run<T: Transport, S: Solver>(
         let mut report = solver.report();
         report.checksum = sent_checksum;
         publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
+        if let Some(v) = &mut viewer {
+            v.offer(&session, &window, &*solver)?;
+        }
     }
 }
 
@@ -196,14 +273,25 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
     session.wait_until("the launcher", |_| clock.connected() && summary_pub.subscriber_count() >= 1)?;
     session.ready()?;
+    let mut viewer = Viewer::open(session)?;
     for step in 1..=scene.steps {
-        if !clock.obey(session, step - 1)? {
+        let go_on = clock.obey(session, step - 1, |c| match solver.command(step - 1, c) {
+            Ok(()) => AckStatus::Applied,
+            Err(why) => {
+                eprintln!("{}: command {} refused: {why}", session.role.binary(), c.command);
+                AckStatus::Unsupported
+            }
+        })?;
+        if !go_on {
             break;
         }
         let window = StepWindow::of(scene, step);
         let t = Instant::now();
         solver.step_alone(&window)?;
         publish_summary(session, &mut summary_pub, &window, &solver.report(), t.elapsed(), Duration::ZERO)?;
+        if let Some(v) = &mut viewer {
+            v.offer(session, &window, &*solver)?;
+        }
     }
     Ok(())
 }
@@ -264,18 +352,17 @@ impl<T: Transport> RunClock<T> {
         self.control.publisher_count() >= 1 && self.ack.subscriber_count() >= 1
     }
 
-    /// Applies pending control commands after macro-step `done`, acknowledging each; while
-    /// paused, blocks on the control service (with liveness checks). Returns `false` when the
-    /// run must stop before the next step.
-    pub fn obey(&mut self, session: &Session<'_, T>, done: u64) -> anyhow::Result<bool> {
+    /// Applies pending control commands after macro-step `done`, acknowledging each
+    /// (`snapshot` and `set` through `apply`); while paused, blocks on the control service
+    /// (with liveness checks). Returns `false` when the run must stop before the next step.
+    pub fn obey(&mut self, session: &Session<'_, T>, done: u64, mut apply: impl FnMut(&Control) -> AckStatus) -> anyhow::Result<bool> {
         loop {
             let timeout = if self.paused { crate::session::POLL } else { Duration::ZERO };
             match self.control.receive(timeout, |_, c| c.first().copied())? {
                 Some(Some(c)) => {
                     let status = match Command::from_code(c.command) {
                         Some(Command::Stop | Command::Pause | Command::Resume) => AckStatus::Applied,
-                        // Snapshot and set act on the solvers' state: not carried yet.
-                        Some(Command::Snapshot | Command::Set) => AckStatus::Unsupported,
+                        Some(Command::Snapshot | Command::Set) => apply(&c),
                         None => AckStatus::UnknownCommand,
                     };
                     let header = session.header(done, 0.0, 0.0);

@@ -7,7 +7,7 @@
 
 use anyhow::bail;
 use grains_protocol::names;
-use grains_protocol::wire::{NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
+use grains_protocol::wire::{AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -16,6 +16,7 @@ use std::time::Instant;
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     let mut session = join(transport, Role::Coupler, scene, opts)?;
     let mut clock = RunClock::open(&session)?;
+    let mut command_pub = session.publisher::<Control, StepHeader>(&names::COMMAND, 1)?;
     let mut dem_sub = session.subscriber::<RasterNode, StepHeader>(&names::DEM_RASTER)?;
     let mut mpm_sub = session.subscriber::<RasterNode, StepHeader>(&names::MPM_RASTER)?;
     let mut step_pub = session.publisher::<StepBegin, StepHeader>(&names::STEP_BEGIN, 1)?;
@@ -28,6 +29,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
             && dem_sub.publisher_count() >= 1
             && mpm_sub.publisher_count() >= 1
             && step_pub.subscriber_count() >= step_subscribers
+            && command_pub.subscriber_count() >= 2
             && vel_pub.subscriber_count() >= 2
             && summary_pub.subscriber_count() >= 1
     })?;
@@ -35,7 +37,25 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 
     let mut last = 0;
     for step in 1..=scene.steps {
-        if !clock.obey(&session, step - 1)? {
+        // Snapshot and set act on the solvers' state: checked here, carried out by both
+        // solvers before the next step.
+        let mut forward = Ok(());
+        let go_on = clock.obey(&session, step - 1, |c| {
+            if !accepts(scene, c) {
+                return AckStatus::Unsupported;
+            }
+            let header = session.header(step - 1, 0.0, 0.0);
+            let sent = command_pub.publish(1, |h, out| {
+                *h = header;
+                out[0] = *c;
+            });
+            if let Err(e) = sent {
+                forward = Err(e);
+            }
+            AckStatus::Applied
+        })?;
+        forward?;
+        if !go_on {
             break;
         }
         let window = StepWindow::of(scene, step);
@@ -97,4 +117,16 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         };
     })?;
     Ok(())
+}
+
+/// Whether both solvers of this run can carry out a `snapshot` or `set` command.
+fn accepts(scene: &Scene, c: &Control) -> bool {
+    match Command::from_code(c.command) {
+        Some(Command::Snapshot) => true,
+        Some(Command::Set) => Param::from_code(c.key).is_some_and(|p| {
+            let (lo, hi, _) = p.range();
+            (lo..=hi).contains(&c.value) && !(p == Param::GravityZ && scene.dim() == 2)
+        }),
+        _ => false,
+    }
 }

@@ -8,8 +8,8 @@ use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemState, WallShape};
 use grains_grid::{Grid, Kernel};
 use grains_protocol::scene::{GrainTransfer, Scene};
-use grains_protocol::wire::{NodeVelocity, RasterNode};
-use grains_service::solver::{Solver, SolverReport, StepWindow};
+use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_service::solver::{Solver, SolverReport, StepWindow, view_stride};
 use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
@@ -18,6 +18,8 @@ pub struct DemSolver<S: Space> {
     substeps: u32,
     grain_transfer: GrainTransfer,
     frames: Option<(FrameWriter, u64)>,
+    /// The run's output directory (for a snapshot when frames are off).
+    out_dir: Option<std::path::PathBuf>,
     /// `walls.csv`: per macro-step, the force of the grains on every wall and where the wall
     /// is (force–displacement curves of plates, penetrometers, drums).
     walls_log: Option<std::io::BufWriter<std::fs::File>>,
@@ -60,6 +62,7 @@ impl<S: Space> DemSolver<S> {
             substeps: scene.coupling.substeps,
             grain_transfer: scene.coupling.grain_transfer,
             frames: frames.map(|f| (f, scene.output.frames_every)),
+            out_dir: out_dir.map(std::path::Path::to_path_buf),
             walls_log,
             energy_bound,
             grid,
@@ -194,6 +197,48 @@ impl<S: Space> Solver for DemSolver<S> {
         self.pipeline.run(&mut self.state, dt, self.substeps as usize);
         self.check(window.step, dt)?;
         self.after_step(window)
+    }
+
+    fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
+        let g = &self.state.grains;
+        for i in (0..g.len()).step_by(view_stride(g.len(), max)) {
+            out.push(ViewPoint {
+                id: g.id[i],
+                position: S::to_array(g.x[i]),
+                velocity: S::to_array(g.v[i]),
+                size: g.radius[i],
+            });
+        }
+        g.len() as u64
+    }
+
+    /// `snapshot`: a frame of the grains now (`frames/`); `set gravity.*`.
+    fn command(&mut self, done: u64, c: &Control) -> Result<(), String> {
+        match (Command::from_code(c.command), Param::from_code(c.key)) {
+            (Some(Command::Snapshot), _) => {
+                if self.frames.is_none() {
+                    let dir = self.out_dir.as_deref().ok_or("no output directory: nowhere to write a snapshot")?;
+                    let writer = FrameWriter::new(dir).map_err(|e| e.to_string())?;
+                    self.frames = Some((writer, 0));
+                }
+                let (f, every) = self.frames.as_mut().expect("made above");
+                if *every == 0 || !done.is_multiple_of(*every) {
+                    f.write(done, &self.state, &self.pipeline).map_err(|e| e.to_string())?;
+                }
+                Ok(())
+            }
+            (Some(Command::Set), Some(p @ (Param::GravityX | Param::GravityY | Param::GravityZ))) => {
+                let k = p as usize - Param::GravityX as usize;
+                if k >= S::DIM {
+                    return Err(format!("{} in a {}D run", p.name(), S::DIM));
+                }
+                let mut g = S::to_array(self.state.params.gravity);
+                g[k] = c.value;
+                self.state.params.gravity = S::from_array(g);
+                Ok(())
+            }
+            _ => Err(format!("command {} (key {}) is not one the DEM takes", c.command, c.key)),
+        }
     }
 
     fn report(&self) -> SolverReport {

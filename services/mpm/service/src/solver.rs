@@ -7,8 +7,8 @@ use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline};
 use grains_mpm::points::{Points, totals};
 use grains_protocol::scene::Scene;
-use grains_protocol::wire::{NodeVelocity, RasterNode};
-use grains_service::solver::{Solver, SolverReport, StepWindow};
+use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_service::solver::{Solver, SolverReport, StepWindow, view_stride};
 use grains_service::vtu::{Field, PointFrames, Values};
 
 pub struct MpmSolver<S: MpmSpace> {
@@ -16,6 +16,8 @@ pub struct MpmSolver<S: MpmSpace> {
     pub params: MpmParams<S>,
     pub pipeline: MpmPipeline<S>,
     frames: Option<(PointFrames, u64)>,
+    /// The run's output directory (for a snapshot when frames are off).
+    out_dir: Option<std::path::PathBuf>,
     /// Kinetic energy above which the run is declared runaway [J].
     energy_bound: f64,
     /// The predicted grid momentum of the current step (coupled runs).
@@ -35,6 +37,7 @@ impl<S: MpmSpace> MpmSolver<S> {
             params,
             pipeline,
             frames,
+            out_dir: out_dir.map(std::path::Path::to_path_buf),
             energy_bound,
             raster: Vec::new(),
         };
@@ -184,6 +187,47 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             .step(&mut self.points, &self.params, window.dt)
             .map_err(|e| step_failed(window.step, time, e))?;
         self.after_step(window)
+    }
+
+    fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
+        let p = &self.points;
+        for k in (0..p.len()).step_by(view_stride(p.len(), max)) {
+            out.push(ViewPoint {
+                id: p.id[k],
+                position: S::to_array(p.x[k]),
+                velocity: S::to_array(p.v[k]),
+                size: 0.5 * p.volume[k].powf(1.0 / S::DIM as f64),
+            });
+        }
+        p.len() as u64
+    }
+
+    /// `snapshot`: a frame of the points now (`frames/`); `set gravity.*`.
+    fn command(&mut self, done: u64, c: &Control) -> Result<(), String> {
+        match (Command::from_code(c.command), Param::from_code(c.key)) {
+            (Some(Command::Snapshot), _) => {
+                if self.frames.is_none() {
+                    let dir = self.out_dir.as_deref().ok_or("no output directory: nowhere to write a snapshot")?;
+                    self.frames = Some((PointFrames::new(dir, "points").map_err(|e| e.to_string())?, 0));
+                }
+                let every = self.frames.as_ref().map_or(0, |f| f.1);
+                if every == 0 || !done.is_multiple_of(every) {
+                    self.write_frame(done).map_err(|e| e.to_string())?;
+                }
+                Ok(())
+            }
+            (Some(Command::Set), Some(p @ (Param::GravityX | Param::GravityY | Param::GravityZ))) => {
+                let k = p as usize - Param::GravityX as usize;
+                if k >= S::DIM {
+                    return Err(format!("{} in a {}D run", p.name(), S::DIM));
+                }
+                let mut g = S::to_array(self.params.gravity);
+                g[k] = c.value;
+                self.params.gravity = S::from_array(g);
+                Ok(())
+            }
+            _ => Err(format!("command {} (key {}) is not one the MPM takes", c.command, c.key)),
+        }
     }
 
     fn report(&self) -> SolverReport {
