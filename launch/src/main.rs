@@ -58,7 +58,7 @@ enum Cmd {
         #[arg(long)]
         run: String,
         /// pause | resume | stop | snapshot | set KEY VALUE
-        #[arg(required = true, num_args = 1..=3)]
+        #[arg(required = true, num_args = 1..=3, allow_hyphen_values = true)]
         command: Vec<String>,
         #[command(flatten)]
         remote: Remote,

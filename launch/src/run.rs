@@ -500,12 +500,13 @@ fn follow_acks<S: Subscriber<Ack, StepHeader>>(acks: &mut S, announce: bool, sto
         }
         if announce {
             let what = match c {
-                Command::Pause => "paused",
-                Command::Resume => "resumed",
-                Command::Stop => "stopping",
-                _ => "acknowledged",
+                Command::Pause => "paused by a control command",
+                Command::Resume => "resumed by a control command",
+                Command::Stop => "stopping on a control command",
+                Command::Snapshot => "snapshot (frames) by a control command",
+                Command::Set => "a parameter set by a control command",
             };
-            eprintln!("\ngrains: {what} by a control command after step {}", a.step);
+            eprintln!("\ngrains: {what} after step {}", a.step);
         }
     }
     Ok(())

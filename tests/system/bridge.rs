@@ -389,3 +389,38 @@ fn a_client_that_never_reads_views_does_not_slow_the_run() {
     );
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// The command-line clients: `grains runs` lists the run, `grains monitor` prints its table,
+/// `grains steer` sets a negative value and stops it.
+#[test]
+fn the_command_line_clients_list_watch_and_steer_a_run() {
+    let _machine = machine();
+    let out = out_dir("bridge-cli");
+    let connect = free_endpoint();
+    let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", FOREVER, "--set", NO_FRAMES]);
+    wait_reachable(&endpoint(&connect, None), &run, &launcher);
+    let grains = |args: &[&str]| {
+        let o = std::process::Command::new(bin("grains")).args(args).output().expect("grains");
+        let text = String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+        (o.status.success(), text)
+    };
+    let (ok, text) = grains(&["runs", "--connect", &connect]);
+    assert!(ok && text.contains(&run) && text.contains("dem_small_2d"), "{text}");
+    let (ok, text) = grains(&["monitor", "--run", &run, "--connect", &connect, "--rows", "3"]);
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(ok && lines.len() == 4 && lines[0].contains("steps/s"), "{text}");
+    let steps: Vec<u64> = lines[1..]
+        .iter()
+        .map(|l| l.split_whitespace().next().unwrap().parse().unwrap())
+        .collect();
+    assert!(steps.windows(2).all(|w| w[0] <= w[1]) && steps[0] < steps[2], "{steps:?}");
+    let (ok, text) = grains(&["steer", "--run", &run, "--connect", &connect, "set", "gravity.y", "-3.7"]);
+    assert!(ok && text.contains("\"ok\":true"), "{text}");
+    let (ok, text) = grains(&["steer", "--run", &run, "--connect", &connect, "jump"]);
+    assert!(!ok && text.contains("unknown command"), "{text}");
+    let (ok, text) = grains(&["steer", "--run", &run, "--connect", &connect, "stop"]);
+    assert!(ok, "{text}");
+    assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
+    assert_eq!(summary(&dir)["status"], "stopped");
+    std::fs::remove_dir_all(&out).unwrap();
+}
