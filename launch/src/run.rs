@@ -149,15 +149,19 @@ pub fn new_run_id() -> String {
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
-    // Participants read the run's copy of the scene: packing files must not depend on where
-    // that copy lies, so their paths become absolute there.
-    let (scene, text) = if scene.bodies.iter().any(|b| b.packing.is_some()) {
+    // Participants read the run's copy of the scene: packing and bridge settings files must
+    // not depend on where that copy lies, so their paths become absolute there.
+    let bridge_settings = scene.bridge.as_ref().and_then(|b| b.settings.as_ref());
+    let (scene, text) = if scene.bodies.iter().any(|b| b.packing.is_some()) || bridge_settings.is_some() {
         let mut overrides = opts.overrides.clone();
+        let absolute = |p: &Path| std::fs::canonicalize(p).with_context(|| format!("resolving {}", p.display()));
         for (k, b) in scene.bodies.iter().enumerate() {
             if let Some(p) = &b.packing {
-                let abs = std::fs::canonicalize(p).with_context(|| format!("resolving {}", p.display()))?;
-                overrides.push(format!("body.{k}.packing={:?}", abs.display().to_string()));
+                overrides.push(format!("body.{k}.packing={:?}", absolute(p)?.display().to_string()));
             }
+        }
+        if let Some(p) = bridge_settings {
+            overrides.push(format!("bridge.settings={:?}", absolute(p)?.display().to_string()));
         }
         scene::load_with_overrides(&opts.scene_path, &overrides)?
     } else {
@@ -181,7 +185,16 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             "--external needs --transport ipc: an external participant is another process".into()
         ));
     }
-    let bridge_cfg = match &opts.bridge {
+    // The bridge: asked for on the command line, or by the scene's [bridge] table.
+    let bridge_args = match (&opts.bridge, &scene.bridge) {
+        (Some(args), _) => Some(args.clone()),
+        (None, Some(b)) => Some(BridgeArgs {
+            config: b.settings.clone(),
+            ..BridgeArgs::default()
+        }),
+        (None, None) => None,
+    };
+    let bridge_cfg = match &bridge_args {
         Some(args) => Some(args.resolve().map_err(|e| BadInput(format!("{e:#}")))?),
         None => None,
     };
@@ -208,7 +221,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary())?;
             let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
             let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
-            let bridge = || match &opts.bridge {
+            let bridge = || match &bridge_args {
                 Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir).map(Some),
                 None => Ok(None),
             };

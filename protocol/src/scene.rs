@@ -275,6 +275,13 @@ pub struct Output {
     pub frames_every: u64,
 }
 
+/// `[bridge]`: open every run of this scene to remote clients (as `grains run --bridge`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneBridge {
+    /// The bridge settings file (listen, steering, rate, access control), if any.
+    pub settings: Option<PathBuf>,
+}
+
 /// A test scene whose solvers publish synthetic rasters instead of physics (issue 2): it
 /// proves the runtime with real payloads and real checks. Never part of a physics scene.
 #[derive(Clone, Debug, PartialEq)]
@@ -325,6 +332,8 @@ pub struct Scene {
     pub mpm: MpmSettings,
     pub oracle: Option<Oracle>,
     pub output: Output,
+    /// Start the zenoh bridge with every run (`[bridge] enabled = true`).
+    pub bridge: Option<SceneBridge>,
     pub synthetic: Option<Synthetic>,
 }
 
@@ -1151,6 +1160,28 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
     let output = Output {
         frames_every: raw.output.as_ref().and_then(|o| o.frames_every).unwrap_or(0),
     };
+    let bridge = match &raw.bridge {
+        Some(b) if b.enabled => Some(SceneBridge {
+            settings: match &b.settings {
+                None => None,
+                Some(p) => {
+                    let path = ctx.path.parent().unwrap_or(Path::new(".")).join(p.get_ref());
+                    if !path.is_file() {
+                        return Err(ctx.err(
+                            Some(p.span()),
+                            Some("bridge.settings"),
+                            format!(
+                                "no bridge settings file at {} (paths are relative to the scene file)",
+                                path.display()
+                            ),
+                        ));
+                    }
+                    Some(path)
+                }
+            },
+        }),
+        _ => None,
+    };
 
     let synthetic = match &raw.synthetic {
         None => None,
@@ -1269,6 +1300,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         mpm,
         oracle,
         output,
+        bridge,
         synthetic,
     })
 }
@@ -1354,6 +1386,7 @@ pub mod raw {
         pub mpm: Option<RawMpm>,
         pub oracle: Option<RawOracle>,
         pub output: Option<RawOutput>,
+        pub bridge: Option<RawBridge>,
         pub synthetic: Option<RawSynthetic>,
     }
 
@@ -1474,6 +1507,13 @@ pub mod raw {
     pub struct RawOracle {
         pub kind: Spanned<String>,
         pub every: Option<Spanned<u64>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RawBridge {
+        pub enabled: bool,
+        pub settings: Option<Spanned<String>>,
     }
 
     #[derive(Deserialize)]

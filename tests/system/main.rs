@@ -159,6 +159,10 @@ fn broken_scene_files_exit_2_naming_file_and_field() {
         (garbage.clone(), &["not a text file"]),
         // Valid syntax, but a kind of oracle this build does not have.
         ("tests/scenes/bad/oracle_kind.toml".into(), &["oracle.kind", "\"fixed\""]),
+        (
+            "tests/scenes/bad/bridge_settings.toml".into(),
+            &[":49:", "bridge.settings", "no_such_bridge.toml"],
+        ),
     ];
     for (file, needles) in cases {
         let (status, err) = run_to_end(&["run", &file, "--out", out.to_str().unwrap()]);
