@@ -112,7 +112,7 @@ pub fn serve<T: Transport>(
         let mut paused = false;
         let mut seq = SEQ_BASE;
         let mut pending = Pending::new();
-        let mut published: Option<(u64, Instant)> = None;
+        let mut published: Option<(u64, Instant, bool)> = None;
         let mut last_dead_check = Instant::now();
         let min_interval = if cfg.rate > 0.0 {
             Duration::from_secs_f64(1.0 / cfg.rate)
@@ -213,13 +213,14 @@ pub fn serve<T: Transport>(
                 }
             }
 
-            // The latest complete step, at most `rate` times a second.
+            // The latest complete step, at most `rate` times a second, and at once when the
+            // run pauses or resumes (no new step says so).
             if let Some(step) = gather.latest_step()
-                && published.is_none_or(|(s, at)| s < step && at.elapsed() >= min_interval)
+                && published.is_none_or(|(s, at, p)| (s < step && at.elapsed() >= min_interval) || p != paused)
                 && let Some(d) = doc(&gather, paused)
             {
                 out(Out::Summary(d.to_string()));
-                published = Some((step, Instant::now()));
+                published = Some((step, Instant::now(), paused));
             }
 
             // Participants that died lose their token.
