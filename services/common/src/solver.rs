@@ -8,7 +8,7 @@ use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{
-    Ack, AckStatus, Command, Control, NodeVelocity, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
+    Ack, AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
 };
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -124,6 +124,21 @@ impl<T: Transport> Viewer<T> {
         })?;
         Ok(())
     }
+}
+
+/// Gravity after a `set` of `param` to `value` in a `dim`-dimensional run (for
+/// [`Solver::command`]); refused for an axis the run does not have.
+pub fn set_gravity(mut gravity: [f64; 3], dim: usize, param: Param, value: f64) -> Result<[f64; 3], String> {
+    let axis = match param {
+        Param::GravityX => 0,
+        Param::GravityY => 1,
+        Param::GravityZ => 2,
+    };
+    if axis >= dim {
+        return Err(format!("{} in a {dim}D run", param.name()));
+    }
+    gravity[axis] = value;
+    Ok(gravity)
 }
 
 /// Every k-th of `n` items so that at most `max` remain (for [`Solver::view`]).

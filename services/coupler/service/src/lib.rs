@@ -9,7 +9,7 @@ use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
-use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary};
+use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary, set_gravity};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::time::Instant;
 
@@ -125,7 +125,7 @@ fn accepts(scene: &Scene, c: &Control) -> bool {
         Some(Command::Snapshot) => true,
         Some(Command::Set) => Param::from_code(c.key).is_some_and(|p| {
             let (lo, hi, _) = p.range();
-            (lo..=hi).contains(&c.value) && !(p == Param::GravityZ && scene.dim() == 2)
+            (lo..=hi).contains(&c.value) && set_gravity([0.0; 3], scene.dim(), p, c.value).is_ok()
         }),
         _ => false,
     }

@@ -9,7 +9,7 @@ use grains_dem::state::{DemState, WallShape};
 use grains_grid::{Grid, Kernel};
 use grains_protocol::scene::{GrainTransfer, Scene};
 use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
-use grains_service::solver::{Solver, SolverReport, StepWindow, view_stride};
+use grains_service::solver::{Solver, SolverReport, StepWindow, set_gravity, view_stride};
 use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
@@ -227,13 +227,8 @@ impl<S: Space> Solver for DemSolver<S> {
                 }
                 Ok(())
             }
-            (Some(Command::Set), Some(p @ (Param::GravityX | Param::GravityY | Param::GravityZ))) => {
-                let k = p as usize - Param::GravityX as usize;
-                if k >= S::DIM {
-                    return Err(format!("{} in a {}D run", p.name(), S::DIM));
-                }
-                let mut g = S::to_array(self.state.params.gravity);
-                g[k] = c.value;
+            (Some(Command::Set), Some(p)) => {
+                let g = set_gravity(S::to_array(self.state.params.gravity), S::DIM, p, c.value)?;
                 self.state.params.gravity = S::from_array(g);
                 Ok(())
             }

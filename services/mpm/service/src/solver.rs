@@ -8,7 +8,7 @@ use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline};
 use grains_mpm::points::{Points, totals};
 use grains_protocol::scene::Scene;
 use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
-use grains_service::solver::{Solver, SolverReport, StepWindow, view_stride};
+use grains_service::solver::{Solver, SolverReport, StepWindow, set_gravity, view_stride};
 use grains_service::vtu::{Field, PointFrames, Values};
 
 pub struct MpmSolver<S: MpmSpace> {
@@ -216,13 +216,8 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
                 }
                 Ok(())
             }
-            (Some(Command::Set), Some(p @ (Param::GravityX | Param::GravityY | Param::GravityZ))) => {
-                let k = p as usize - Param::GravityX as usize;
-                if k >= S::DIM {
-                    return Err(format!("{} in a {}D run", p.name(), S::DIM));
-                }
-                let mut g = S::to_array(self.params.gravity);
-                g[k] = c.value;
+            (Some(Command::Set), Some(p)) => {
+                let g = set_gravity(S::to_array(self.params.gravity), S::DIM, p, c.value)?;
                 self.params.gravity = S::from_array(g);
                 Ok(())
             }
