@@ -186,8 +186,12 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         ));
     }
     // The bridge: asked for on the command line, or by the scene's [bridge] table.
+    // The scene's settings file is the base; flags on the command line override it.
     let bridge_args = match (&opts.bridge, &scene.bridge) {
-        (Some(args), _) => Some(args.clone()),
+        (Some(args), b) => Some(BridgeArgs {
+            config: args.config.clone().or_else(|| b.as_ref().and_then(|b| b.settings.clone())),
+            ..args.clone()
+        }),
         (None, Some(b)) => Some(BridgeArgs {
             config: b.settings.clone(),
             ..BridgeArgs::default()
@@ -333,8 +337,10 @@ fn supervise<T: Transport>(
     let mut interrupted = false;
     let mut stop_sent: Option<Instant> = None;
     let mut release: Option<Instant> = None;
-    // Step after which a control command (from the bridge) stopped the run.
+    // Step after which a control command (from the bridge) stopped the run, and whether one
+    // holds it paused.
     let mut stopped_at: Option<u64> = None;
+    let mut paused = false;
     let mut last_dead_check = Instant::now();
     let mut progress = Progress::new(ctx.opts.progress, scene.steps);
     let n_spawned = parts.pids().len();
@@ -381,12 +387,17 @@ fn supervise<T: Transport>(
         progress.show(metrics.last, release);
 
         // Acknowledged commands: what the time owner did, said once on stderr.
-        follow_acks(&mut ack_sub, ctx.opts.announce && !interrupted, &mut stopped_at)?;
+        follow_acks(&mut ack_sub, ctx.opts.announce && !interrupted, &mut stopped_at, &mut paused)?;
         if let Some(b) = &mut bridge
             && let Some(how) = b.poll()
         {
             eprintln!("\ngrains: warning: the bridge {how}; the run goes on without remote access");
             bridge = None;
+            // Nobody could resume a run paused from outside: it goes on.
+            if paused {
+                eprintln!("grains: the run was paused from outside: resuming it");
+                send_control(&mut control_pub, ctx.run_id, Command::Resume)?;
+            }
         }
 
         // Supervision: our children, then dead nodes (external participants too).
@@ -399,10 +410,12 @@ fn supervise<T: Transport>(
         }
         if last_dead_check.elapsed() > Duration::from_millis(300) {
             last_dead_check = Instant::now();
-            let (gone_bridge, dead): (Vec<_>, Vec<_>) = t.dead_peers().into_iter().partition(|d| d.starts_with(Role::Bridge.binary()));
-            if !gone_bridge.is_empty() && bridge.is_some() {
-                eprintln!("\ngrains: warning: the bridge died; the run goes on without remote access");
-            }
+            // The bridge is our child: its end is seen above.
+            let dead: Vec<_> = t
+                .dead_peers()
+                .into_iter()
+                .filter(|d| !d.starts_with(Role::Bridge.binary()))
+                .collect();
             if !dead.is_empty() && failure.is_none() && !interrupted {
                 failure = Some(format!("participant {} died", dead.join(", ")));
             }
@@ -418,21 +431,7 @@ fn supervise<T: Transport>(
                     .iter()
                     .any(|r| ctx.opts.external.contains(r) && *r == scene.time_owner() && !roster.ready.contains(r))
             {
-                let header = StepHeader {
-                    protocol_version: PROTOCOL_VERSION,
-                    sender: Role::Launcher as u32,
-                    run_id: run_id_bytes(ctx.run_id),
-                    ..StepHeader::default()
-                };
-                control_pub.publish(1, |h, out| {
-                    *h = header;
-                    out[0] = Control {
-                        seq: 1,
-                        command: Command::Stop as u32,
-                        key: 0,
-                        value: 0.0,
-                    };
-                })?;
+                send_control(&mut control_pub, ctx.run_id, Command::Stop)?;
                 stop_sent = Some(Instant::now());
             } else {
                 parts.terminate(Duration::from_secs(1));
@@ -459,7 +458,7 @@ fn supervise<T: Transport>(
                     failure.get_or_insert(e);
                 }
             }
-            follow_acks(&mut ack_sub, ctx.opts.announce && !interrupted, &mut stopped_at)?;
+            follow_acks(&mut ack_sub, ctx.opts.announce && !interrupted, &mut stopped_at, &mut paused)?;
             break;
         }
     }
@@ -500,16 +499,44 @@ fn supervise<T: Transport>(
     Ok((outcome, roster_json(&roster, &*parts, ctx)))
 }
 
+/// The launcher's command to the time owner (its sequence numbers are small).
+fn send_control<P: Publisher<Control, StepHeader>>(control: &mut P, run_id: &str, command: Command) -> anyhow::Result<()> {
+    let header = StepHeader {
+        protocol_version: PROTOCOL_VERSION,
+        sender: Role::Launcher as u32,
+        run_id: run_id_bytes(run_id),
+        ..StepHeader::default()
+    };
+    control.publish(1, |h, out| {
+        *h = header;
+        out[0] = Control {
+            seq: command as u64,
+            command: command as u32,
+            key: 0,
+            value: 0.0,
+        };
+    })?;
+    Ok(())
+}
+
 /// Applied control commands: said on stderr (if `announce`); a stop's step goes to
-/// `stopped_at`.
-fn follow_acks<S: Subscriber<Ack, StepHeader>>(acks: &mut S, announce: bool, stopped_at: &mut Option<u64>) -> anyhow::Result<()> {
+/// `stopped_at`, pause and resume to `paused`.
+fn follow_acks<S: Subscriber<Ack, StepHeader>>(
+    acks: &mut S,
+    announce: bool,
+    stopped_at: &mut Option<u64>,
+    paused: &mut bool,
+) -> anyhow::Result<()> {
     while let Some(Some(a)) = acks.receive(Duration::ZERO, |_, a| a.first().copied())? {
         let Some(c) = Command::from_code(a.command) else { continue };
         if a.status != AckStatus::Applied as u32 {
             continue;
         }
-        if c == Command::Stop {
-            *stopped_at = Some(a.step);
+        match c {
+            Command::Stop => *stopped_at = Some(a.step),
+            Command::Pause => *paused = true,
+            Command::Resume => *paused = false,
+            Command::Snapshot | Command::Set => {}
         }
         if announce {
             let what = match c {

@@ -263,9 +263,10 @@ pub enum Command {
 }
 
 impl Command {
+    pub const ALL: [Command; 5] = [Command::Pause, Command::Resume, Command::Stop, Command::Snapshot, Command::Set];
+
     pub fn from_code(code: u32) -> Option<Command> {
-        use Command::*;
-        [Pause, Resume, Stop, Snapshot, Set].into_iter().find(|c| *c as u32 == code)
+        Command::ALL.into_iter().find(|c| *c as u32 == code)
     }
 
     /// Lower-case name, as remote clients spell it (`pause`, `set`, …).
@@ -299,34 +300,71 @@ wire_type! {
     }
 }
 
-/// Parameters a `set` command may change: [`Control::key`] codes, names as remote clients
-/// spell them, and the values allowed.
+/// A parameter a `set` command may change. On the wire ([`Control::key`]): gravity 1 + axis;
+/// the translation velocity of scene wall `w` 16 + 4 w + axis (axis 0, 1, 2 = x, y, z).
+/// Remote clients spell them `gravity.y`, `wall.2.velocity.x`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
 pub enum Param {
-    GravityX = 1,
-    GravityY = 2,
-    GravityZ = 3,
+    Gravity { axis: usize },
+    WallVelocity { wall: usize, axis: usize },
 }
 
-impl Param {
-    pub const ALL: [Param; 3] = [Param::GravityX, Param::GravityY, Param::GravityZ];
+const AXES: [&str; 3] = ["x", "y", "z"];
 
+impl Param {
     pub fn from_code(code: u32) -> Option<Param> {
-        Param::ALL.into_iter().find(|p| *p as u32 == code)
+        let code = code as usize;
+        match code {
+            1..=3 => Some(Param::Gravity { axis: code - 1 }),
+            16.. if (code - 16) % 4 < 3 => Some(Param::WallVelocity {
+                wall: (code - 16) / 4,
+                axis: (code - 16) % 4,
+            }),
+            _ => None,
+        }
     }
 
-    pub fn name(self) -> &'static str {
+    pub fn code(self) -> u32 {
+        (match self {
+            Param::Gravity { axis } => 1 + axis,
+            Param::WallVelocity { wall, axis } => 16 + 4 * wall + axis,
+        }) as u32
+    }
+
+    pub fn name(self) -> String {
         match self {
-            Param::GravityX => "gravity.x",
-            Param::GravityY => "gravity.y",
-            Param::GravityZ => "gravity.z",
+            Param::Gravity { axis } => format!("gravity.{}", AXES[axis]),
+            Param::WallVelocity { wall, axis } => format!("wall.{wall}.velocity.{}", AXES[axis]),
+        }
+    }
+
+    /// The parameter a client names (`gravity.y`, `wall.0.velocity.x`).
+    pub fn parse(name: &str) -> Option<Param> {
+        let axis = |a: &str| AXES.iter().position(|x| *x == a);
+        let parts: Vec<&str> = name.split('.').collect();
+        match parts.as_slice() {
+            ["gravity", a] => Some(Param::Gravity { axis: axis(a)? }),
+            ["wall", w, "velocity", a] if w.bytes().all(|b| b.is_ascii_digit()) && w.len() <= 4 => Some(Param::WallVelocity {
+                wall: w.parse().ok()?,
+                axis: axis(a)?,
+            }),
+            _ => None,
         }
     }
 
     /// Allowed values (inclusive) and their unit.
     pub fn range(self) -> (f64, f64, &'static str) {
-        (-100.0, 100.0, "m/s²")
+        match self {
+            Param::Gravity { .. } => (-100.0, 100.0, "m/s²"),
+            Param::WallVelocity { .. } => (-10.0, 10.0, "m/s"),
+        }
+    }
+
+    /// The axis the parameter acts along.
+    pub fn axis(self) -> usize {
+        match self {
+            Param::Gravity { axis } | Param::WallVelocity { axis, .. } => axis,
+        }
     }
 }
 
@@ -352,13 +390,15 @@ pub enum AckStatus {
     Applied = 0,
     /// A command code this time owner does not know.
     UnknownCommand = 1,
-    /// A known command this run's participants cannot carry out (yet).
+    /// A known command this run's participants cannot carry out.
     Unsupported = 2,
+    /// Too many commands at once (between two steps, or while paused): not applied, retry.
+    Busy = 3,
 }
 
 impl AckStatus {
     pub fn from_code(code: u32) -> Option<AckStatus> {
         use AckStatus::*;
-        [Applied, UnknownCommand, Unsupported].into_iter().find(|c| *c as u32 == code)
+        [Applied, UnknownCommand, Unsupported, Busy].into_iter().find(|c| *c as u32 == code)
     }
 }

@@ -40,3 +40,32 @@ fn wire_layouts_match_the_spec() {
 fn hello_magic_reads_grains() {
     assert_eq!(&grains_protocol::HELLO_MAGIC.to_le_bytes(), b"GRAINS\0\0");
 }
+
+#[test]
+fn set_parameters_round_trip_through_their_codes_and_names() {
+    use grains_protocol::wire::Param;
+    for p in [
+        Param::Gravity { axis: 0 },
+        Param::Gravity { axis: 2 },
+        Param::WallVelocity { wall: 0, axis: 1 },
+        Param::WallVelocity { wall: 37, axis: 2 },
+    ] {
+        assert_eq!(Param::from_code(p.code()), Some(p));
+        assert_eq!(Param::parse(&p.name()), Some(p));
+    }
+    assert_eq!(Param::Gravity { axis: 1 }.code(), 1 + 1);
+    assert_eq!(Param::WallVelocity { wall: 2, axis: 0 }.code(), 16 + 8);
+    for bad in [0, 4, 15, 19, 23] {
+        assert_eq!(Param::from_code(bad), None, "code {bad}");
+    }
+    for bad in [
+        "gravity",
+        "gravity.w",
+        "wall.x.velocity.y",
+        "wall.1.speed.x",
+        "wall.-1.velocity.x",
+        "wall.99999.velocity.x",
+    ] {
+        assert_eq!(Param::parse(bad), None, "{bad}");
+    }
+}

@@ -68,6 +68,17 @@ def main():
                 fail(f"the state has no {key!r}: {state}")
         print(f"latest: step {state['step']}, {state['grains']} grains, KE {state['kinetic_energy']:.3e} J")
 
+        # The latest view of the grains: all of them here (fewer than 5,000), 3D positions.
+        views = [json.loads(r.ok.payload.to_string()) for r in session.get(f"grains/{run}/state/view/dem", timeout=5.0) if r.ok is not None]
+        if not views:
+            fail("no view of the grains")
+        view = views[0]
+        if not (view["total"] == state["grains"] == view["count"] == len(view["id"]) == len(view["position"]) == len(view["size"])):
+            fail(f"view of {view['count']} of {view['total']} grains, {len(view['position'])} positions; the run has {state['grains']}")
+        if any(len(p) != 3 for p in view["position"]) or not all(s > 0 for s in view["size"]):
+            fail("a view position is not 3D or a size is not positive")
+        print(f"view: {view['count']} grains at step {view['step']}")
+
         ack = command(session, run, {"command": "pause"})
         paused_at = ack["step"]
         time.sleep(0.5)

@@ -185,22 +185,45 @@ fn refused_and_malformed_commands_change_nothing() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// SIGKILL of the bridge of a paused hybrid run (whose solvers look for dead peers while they
+/// wait): the launcher warns and resumes the run, which completes and leaves nothing behind.
 #[test]
 fn killing_the_bridge_does_not_stop_the_run() {
     let _machine = machine();
     let out = out_dir("bridge-kill");
     let connect = free_endpoint();
-    let (mut launcher, run, dir) = bridged(&out, &connect, &["--set", "run.steps=2500", "--set", NO_FRAMES]);
-    wait_reachable(&endpoint(&connect, None), &run, &launcher);
+    let ep = endpoint(&connect, None);
+    let steps = 20_000;
+    let mut args = vec![
+        "run",
+        "tests/scenes/hybrid_small_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--bridge",
+    ];
+    let set_steps = format!("run.steps={steps}");
+    args.extend(["--bridge-listen", &connect, "--steering", "--set", &set_steps, "--set", NO_FRAMES]);
+    let mut launcher = Running::grains(&args);
+    let err = launcher.wait_for("started the bridge", Duration::from_secs(60));
+    let (run, dir) = (run_id(&err), run_dir(&err));
+    wait_reachable(&ep, &run, &launcher);
+    steer(&ep, &run, br#"{"command":"pause"}"#).expect("an answer").expect("pause");
+    // Paused for longer than the solvers' dead-peer checks take.
     let pid = bridge_pid(&launcher.stderr());
     // SAFETY: kill(2) on a child of our child, by pid.
     assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
     let status = launcher.wait_exit(Duration::from_secs(120));
     let err = launcher.stderr();
     assert!(status.success(), "{err}");
-    assert!(err.contains("warning: the bridge"), "the launcher must warn: {err}");
+    assert!(
+        err.contains("warning: the bridge") && err.contains("resuming"),
+        "the launcher must warn and resume: {err}"
+    );
     assert_eq!(summary(&dir)["status"], "completed");
-    assert_eq!(metrics_rows(&dir).len(), 2500);
+    assert_eq!(metrics_rows(&dir).len(), steps);
+    let left = grains_transport::ipc::run_files(&run);
+    assert!(left.is_empty(), "files of run {run} left: {left:?}");
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -251,6 +274,22 @@ fn access_control_lets_in_only_the_listed_users() {
     assert!(ack["step"].as_u64().unwrap() >= later);
     assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
     assert_eq!(summary(&dir)["status"], "stopped");
+
+    // Readers only (steering off): the bridge starts, the reader sees the run.
+    let connect = free_endpoint();
+    std::fs::write(
+        &settings,
+        format!("listen = [{connect:?}]\n[auth]\nusers_file = \"users.txt\"\nreaders = [\"viewer\"]\n"),
+    )
+    .unwrap();
+    let (mut launcher, run, dir) = bridged(
+        &out,
+        &connect,
+        &["--bridge-config", settings.to_str().unwrap(), "--set", "run.steps=3000"],
+    );
+    wait_reachable(&endpoint(&connect, Some(("viewer", "look"))), &run, &launcher);
+    assert!(launcher.wait_exit(Duration::from_secs(60)).success(), "{}", launcher.stderr());
+    assert_eq!(summary(&dir)["status"], "completed");
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -276,7 +315,10 @@ fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
     let refused = steer(&ep, &run, br#"{"command":"set","key":"gravity.z","value":1}"#).expect("an answer");
     assert!(refused.is_err(), "gravity.z in a 2D run must be refused: {refused:?}");
     let g = ack(r#"{"command":"set","key":"gravity.y","value":9.81}"#);
-    std::thread::sleep(Duration::from_millis(500));
+    std::thread::sleep(Duration::from_millis(300));
+    // The box (scene wall 0: four planes) starts to move right at 1 cm/s.
+    let w = ack(r#"{"command":"set","key":"wall.0.velocity.x","value":0.01}"#);
+    std::thread::sleep(Duration::from_millis(300));
     ack(r#"{"command":"stop"}"#);
     assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
     let (py, mass, time) = (column(&dir, "dem_py"), column(&dir, "dem_mass"), column(&dir, "time"));
@@ -294,6 +336,22 @@ fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
         p1 - p0 > 0.5 * m * 9.81 * (t1 - t0),
         "py {p0} -> {p1} over {} s (m = {m} kg)",
         t1 - t0
+    );
+    // walls.csv: the first plane stood still until step w and moves at 1 cm/s after it.
+    let walls = std::fs::read_to_string(dir.join("walls.csv")).unwrap();
+    let x0: Vec<f64> = walls
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(5).unwrap().parse().unwrap())
+        .collect();
+    let dt = 5e-5;
+    let (a, b) = (w as usize, w as usize + 100);
+    assert_eq!(x0[a - 1], x0[0], "the wall moved before the command");
+    assert!(
+        (x0[b - 1] - x0[a - 1] - 0.01 * 100.0 * dt).abs() < 1e-12,
+        "wall x {} -> {}",
+        x0[a - 1],
+        x0[b - 1]
     );
 
     // Hybrid: the coupler forwards the snapshot; both solvers write a frame at that step.

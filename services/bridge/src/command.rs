@@ -4,48 +4,14 @@
 //! ```json
 //! {"command": "pause"}            // also "resume", "stop", "snapshot"
 //! {"command": "set", "key": "gravity.y", "value": -9.81}
+//! {"command": "set", "key": "wall.0.velocity.x", "value": 0.05}
 //! ```
 
-use grains_protocol::wire::Command;
+use grains_protocol::wire::{Command, Param};
 use serde::Deserialize;
 
 /// Longest command payload accepted [bytes]: every valid command fits in far less.
 pub const MAX_COMMAND_BYTES: usize = 1024;
-
-/// A parameter that `set` may change: its wire key, its name and the values allowed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Settable {
-    pub key: u32,
-    pub name: &'static str,
-    pub min: f64,
-    pub max: f64,
-    pub unit: &'static str,
-}
-
-/// The whitelist of `set`. Keys are the wire codes of [`grains_protocol::wire::Control::key`].
-pub const SETTABLE: [Settable; 3] = [
-    Settable {
-        key: 1,
-        name: "gravity.x",
-        min: -100.0,
-        max: 100.0,
-        unit: "m/s²",
-    },
-    Settable {
-        key: 2,
-        name: "gravity.y",
-        min: -100.0,
-        max: 100.0,
-        unit: "m/s²",
-    },
-    Settable {
-        key: 3,
-        name: "gravity.z",
-        min: -100.0,
-        max: 100.0,
-        unit: "m/s²",
-    },
-];
 
 /// A checked command, ready for the wire.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -64,8 +30,8 @@ struct Raw {
     value: Option<serde_json::Value>,
 }
 
-/// Parses and checks one command payload.
-pub fn parse(payload: &[u8]) -> Result<Checked, String> {
+/// Parses and checks one command payload for a run whose scene has `walls` walls.
+pub fn parse(payload: &[u8], walls: usize) -> Result<Checked, String> {
     if payload.len() > MAX_COMMAND_BYTES {
         return Err(format!(
             "payload of {} bytes; a command is a JSON object of at most {MAX_COMMAND_BYTES} bytes",
@@ -79,14 +45,8 @@ pub fn parse(payload: &[u8]) -> Result<Checked, String> {
              {{\"command\": \"set\", \"key\": \"gravity.y\", \"value\": -9.81}}"
         )
     })?;
-    let names = || {
-        let all: Vec<_> = [Command::Pause, Command::Resume, Command::Stop, Command::Snapshot, Command::Set]
-            .iter()
-            .map(|c| c.name())
-            .collect();
-        all.join(", ")
-    };
-    let command = [Command::Pause, Command::Resume, Command::Stop, Command::Snapshot, Command::Set]
+    let names = || Command::ALL.map(Command::name).join(", ");
+    let command = Command::ALL
         .into_iter()
         .find(|c| c.name() == raw.command)
         .ok_or_else(|| format!("unknown command {:?}; allowed: {}", raw.command, names()))?;
@@ -100,23 +60,30 @@ pub fn parse(payload: &[u8]) -> Result<Checked, String> {
             value: 0.0,
         });
     }
-    let allowed = || SETTABLE.iter().map(|s| s.name).collect::<Vec<_>>().join(", ");
+    let allowed = || {
+        let walls = match walls {
+            0 => String::new(),
+            1 => ", wall.0.velocity.x|y|z".to_string(),
+            n => format!(", wall.K.velocity.x|y|z (K < {n})"),
+        };
+        format!("gravity.x|y|z{walls}")
+    };
     let key = raw.key.ok_or_else(|| format!("set: missing \"key\"; settable: {}", allowed()))?;
-    let p = SETTABLE
-        .iter()
-        .find(|s| s.name == key)
+    let p = Param::parse(&key)
+        .filter(|p| !matches!(p, Param::WallVelocity { wall, .. } if *wall >= walls))
         .ok_or_else(|| format!("set: {key:?} is not settable; settable: {}", allowed()))?;
+    let (min, max, unit) = p.range();
     let value = raw
         .value
         .as_ref()
         .and_then(serde_json::Value::as_f64)
-        .ok_or_else(|| format!("set {}: \"value\" must be a number in [{}, {}] {}", p.name, p.min, p.max, p.unit))?;
-    if !(p.min..=p.max).contains(&value) {
-        return Err(format!("set {}: {value} is outside [{}, {}] {}", p.name, p.min, p.max, p.unit));
+        .ok_or_else(|| format!("set {}: \"value\" must be a number in [{min}, {max}] {unit}", p.name()))?;
+    if !(min..=max).contains(&value) {
+        return Err(format!("set {}: {value} is outside [{min}, {max}] {unit}", p.name()));
     }
     Ok(Checked {
         command,
-        key: p.key,
+        key: p.code(),
         value,
     })
 }
@@ -127,15 +94,17 @@ mod tests {
 
     #[test]
     fn good_commands_parse() {
-        assert_eq!(parse(br#"{"command":"pause"}"#).unwrap().command, Command::Pause);
-        assert_eq!(parse(br#" {"command": "stop"} "#).unwrap().command, Command::Stop);
-        let c = parse(br#"{"command":"set","key":"gravity.y","value":-3.5}"#).unwrap();
+        assert_eq!(parse(br#"{"command":"pause"}"#, 0).unwrap().command, Command::Pause);
+        assert_eq!(parse(br#" {"command": "stop"} "#, 0).unwrap().command, Command::Stop);
+        let c = parse(br#"{"command":"set","key":"gravity.y","value":-3.5}"#, 0).unwrap();
         assert_eq!((c.command, c.key, c.value), (Command::Set, 2, -3.5));
+        let c = parse(br#"{"command":"set","key":"wall.1.velocity.x","value":0.5}"#, 2).unwrap();
+        assert_eq!(c.key, Param::WallVelocity { wall: 1, axis: 0 }.code());
     }
 
     #[test]
     fn bad_commands_say_why() {
-        let cases: [(&[u8], &str); 10] = [
+        let cases: [(&[u8], &str); 12] = [
             (b"", "not a command"),
             (b"pause", "not a command"),
             (b"\xff\xfe", "not UTF-8"),
@@ -146,12 +115,17 @@ mod tests {
             (br#"{"command":"set","key":"dt","value":1}"#, "\"dt\" is not settable"),
             (br#"{"command":"set","key":"gravity.y","value":"x"}"#, "must be a number"),
             (br#"{"command":"set","key":"gravity.y","value":1e9}"#, "outside [-100, 100]"),
+            (br#"{"command":"set","key":"wall.2.velocity.x","value":1}"#, "not settable"),
+            (
+                br#"{"command":"set","key":"wall.0.velocity.x","value":11}"#,
+                "outside [-10, 10] m/s",
+            ),
         ];
         for (payload, want) in cases {
-            let err = parse(payload).unwrap_err();
+            let err = parse(payload, 2).unwrap_err();
             assert!(err.contains(want), "{:?}: {err}", String::from_utf8_lossy(payload));
         }
         let huge = vec![b' '; MAX_COMMAND_BYTES + 1];
-        assert!(parse(&huge).unwrap_err().contains("at most 1024 bytes"));
+        assert!(parse(&huge, 2).unwrap_err().contains("at most 1024 bytes"));
     }
 }

@@ -158,7 +158,11 @@ impl BridgeConfig {
         Ok(c)
     }
 
-    /// The access-control list of `run` (zenoh's `access_control` section).
+    /// The access-control list of `run` (zenoh's `access_control` section). Seen from the
+    /// bridge, a client's requests are ingress and what the bridge sends is egress: readers
+    /// may subscribe and query the state and the liveliness tokens (in) and receive them
+    /// (out), but cannot publish anything to other clients; steerers may also query the
+    /// control key and receive its replies.
     pub fn acl(&self, run: &str) -> serde_json::Value {
         let Some(a) = &self.auth else {
             return serde_json::json!({ "enabled": false });
@@ -169,26 +173,30 @@ impl BridgeConfig {
             keys::ALL_BRIDGES.to_string(),
         ];
         let readers: Vec<&String> = a.readers.iter().chain(&a.steerers).collect();
+        let mut subjects = vec![serde_json::json!({ "id": "readers", "usernames": readers })];
+        let mut policies = vec![serde_json::json!({ "rules": ["read_in", "read_out"], "subjects": ["readers"] })];
+        // zenoh refuses a subject without names.
+        if !a.steerers.is_empty() {
+            subjects.push(serde_json::json!({ "id": "steerers", "usernames": a.steerers }));
+            policies.push(serde_json::json!({ "rules": ["steer_in", "steer_out"], "subjects": ["steerers"] }));
+        }
         serde_json::json!({
             "enabled": true,
             "default_permission": "deny",
             "rules": [
-                { "id": "read", "permission": "allow", "flows": ["ingress", "egress"],
-                  "messages": ["declare_subscriber", "put", "query", "reply", "liveliness_token",
-                               "liveliness_query", "declare_liveliness_subscriber"],
+                { "id": "read_in", "permission": "allow", "flows": ["ingress"],
+                  "messages": ["declare_subscriber", "query", "liveliness_query", "declare_liveliness_subscriber"],
                   "key_exprs": read_keys },
-                { "id": "steer", "permission": "allow", "flows": ["ingress", "egress"],
-                  "messages": ["query", "reply"],
-                  "key_exprs": [keys::control(run)] },
+                { "id": "read_out", "permission": "allow", "flows": ["egress"],
+                  "messages": ["put", "reply", "liveliness_token"],
+                  "key_exprs": read_keys },
+                { "id": "steer_in", "permission": "allow", "flows": ["ingress"],
+                  "messages": ["query"], "key_exprs": [keys::control(run)] },
+                { "id": "steer_out", "permission": "allow", "flows": ["egress"],
+                  "messages": ["reply"], "key_exprs": [keys::control(run)] },
             ],
-            "subjects": [
-                { "id": "readers", "usernames": readers },
-                { "id": "steerers", "usernames": a.steerers },
-            ],
-            "policies": [
-                { "rules": ["read"], "subjects": ["readers"] },
-                { "rules": ["steer"], "subjects": ["steerers"] },
-            ],
+            "subjects": subjects,
+            "policies": policies,
         })
     }
 
@@ -233,7 +241,9 @@ pub fn client(endpoint: &str, credentials: Option<(&str, &str)>) -> anyhow::Resu
 /// The bridge's flags, shared by `grains run` (which passes them on) and `grains-bridge`.
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct BridgeArgs {
-    /// Bridge settings file (TOML: listen, steering, rate, [auth]); the flags override it.
+    /// Bridge settings file (TOML: listen, steering, rate, [auth]); the flags override its
+    /// listen and rate and can turn steering on (not off). Default: the scene's [bridge]
+    /// settings, if any.
     #[arg(long = "bridge-config", value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// zenoh endpoint the bridge listens on (repeatable) [default: tcp/127.0.0.1:7447].

@@ -7,7 +7,8 @@
 //! `grains/<run>/alive/<bridge|dem|mpm|…>`. In: commands as queries on `grains/<run>/control`
 //! (only with steering on), checked ([`command`]), sent to the time owner over the control
 //! service and answered with its acknowledgement: the step at which the command took effect,
-//! or why it was refused. A query is never dropped: every command gets an answer.
+//! or why it was refused. A query is never dropped: every command that reaches the bridge gets
+//! an answer (zenoh's access control drops a reader's command before it does).
 //!
 //! The bridge is expendable: it is not admitted to the run, the run does not wait for it, and
 //! if it dies the run goes on. It never blocks the participants: it drains their summaries
@@ -35,6 +36,9 @@ use zenoh::query::Query;
 pub const ACK_TIMEOUT: Duration = Duration::from_secs(5);
 /// Sequence numbers of the bridge's commands start here (the launcher's are small).
 const SEQ_BASE: u64 = 1 << 32;
+/// Commands waiting for their acknowledgement at most: with fewer than the control and ack
+/// services hold (16 each), neither the bridge nor the time owner can wait on the other.
+pub const MAX_IN_FLIGHT: usize = 8;
 
 enum Incoming {
     State(Query),
@@ -151,7 +155,7 @@ pub fn serve<T: Transport>(
                 let expired = now.duration_since(*since) > ACK_TIMEOUT;
                 if expired {
                     let why = format!(
-                        "{}: no acknowledgement from the time owner within {} s (the run may have ended)",
+                        "{}: not acknowledged by the time owner within {} s: it may still take effect (a long step), or the run has ended",
                         c.command.name(),
                         ACK_TIMEOUT.as_secs()
                     );
@@ -185,7 +189,12 @@ pub fn serve<T: Transport>(
                             out(Out::Error(q, error_json(why)));
                             continue;
                         };
-                        match command::parse(&payload) {
+                        if pending.len() >= MAX_IN_FLIGHT {
+                            let why = format!("busy: {MAX_IN_FLIGHT} commands are waiting for the run's acknowledgement; retry");
+                            out(Out::Error(q, error_json(&why)));
+                            continue;
+                        }
+                        match command::parse(&payload, scene.walls.len()) {
                             Err(why) => out(Out::Error(q, error_json(&why))),
                             Ok(c) => {
                                 seq += 1;
@@ -223,9 +232,14 @@ pub fn serve<T: Transport>(
                 published = Some((step, Instant::now(), paused));
             }
 
-            // Participants that died lose their token.
+            // Participants that died lose their token; once every participant has gone, the
+            // run is over and so is the bridge (one started by hand is not told).
             if last_dead_check.elapsed() > Duration::from_millis(500) {
                 last_dead_check = Instant::now();
+                if gather.latest_step().is_some() && summaries.publisher_count() == 0 {
+                    eprintln!("grains-bridge: run {run} has ended");
+                    break;
+                }
                 for dead in t.dead_peers() {
                     alive.retain(|role| {
                         let gone = dead.starts_with(&format!("{} ", role.binary()));
@@ -379,6 +393,11 @@ fn answer_ack(q: Query, c: &command::Checked, a: &Ack) -> Out {
     let why = match AckStatus::from_code(a.status) {
         Some(AckStatus::Unsupported) => format!(
             "{}: refused by the run at step {}: its solvers cannot carry it out (a parameter of an axis the run does not have, or no output directory for a snapshot)",
+            c.command.name(),
+            a.step
+        ),
+        Some(AckStatus::Busy) => format!(
+            "{}: refused at step {}: too many commands at once; retry after the next step",
             c.command.name(),
             a.step
         ),

@@ -126,19 +126,14 @@ impl<T: Transport> Viewer<T> {
     }
 }
 
-/// Gravity after a `set` of `param` to `value` in a `dim`-dimensional run (for
-/// [`Solver::command`]); refused for an axis the run does not have.
-pub fn set_gravity(mut gravity: [f64; 3], dim: usize, param: Param, value: f64) -> Result<[f64; 3], String> {
-    let axis = match param {
-        Param::GravityX => 0,
-        Param::GravityY => 1,
-        Param::GravityZ => 2,
-    };
-    if axis >= dim {
+/// A vector (gravity, a wall's velocity) after a `set` of `param`'s axis to `value` in a
+/// `dim`-dimensional run (for [`Solver::command`]); refused for an axis the run does not have.
+pub fn set_component(mut v: [f64; 3], dim: usize, param: Param, value: f64) -> Result<[f64; 3], String> {
+    if param.axis() >= dim {
         return Err(format!("{} in a {dim}D run", param.name()));
     }
-    gravity[axis] = value;
-    Ok(gravity)
+    v[param.axis()] = value;
+    Ok(v)
 }
 
 /// Every k-th of `n` items so that at most `max` remain (for [`Solver::view`]).

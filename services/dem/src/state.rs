@@ -114,6 +114,8 @@ pub struct Wall<S: Space> {
     pub friction: f64,
     /// Force of the grains on the wall during the last step [N].
     pub load: S::V,
+    /// The scene wall it comes from (a box makes one plane per face).
+    pub id: usize,
 }
 
 impl<S: Space> Wall<S> {
@@ -125,6 +127,7 @@ impl<S: Space> Wall<S> {
             spin: 0.0,
             friction,
             load: S::V::default(),
+            id: 0,
         }
     }
 
@@ -135,6 +138,7 @@ impl<S: Space> Wall<S> {
             spin: 0.0,
             friction,
             load: S::V::default(),
+            id: 0,
         }
     }
 
@@ -145,6 +149,7 @@ impl<S: Space> Wall<S> {
             spin: 0.0,
             friction,
             load: S::V::default(),
+            id: 0,
         }
     }
 }

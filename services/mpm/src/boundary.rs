@@ -30,15 +30,25 @@ pub enum Geometry<S: Space> {
 pub struct Wall<S: Space> {
     pub geometry: Geometry<S>,
     pub contact: Contact,
-    /// Translation velocity [m/s]: the wall is at its start position + velocity · t.
+    /// Translation velocity [m/s]: the wall is at its start position + shift + velocity · t.
     pub velocity: S::V,
+    /// What keeps the position continuous when the velocity changes during a run [m].
+    pub shift: S::V,
+    /// The scene wall this one comes from.
+    pub id: usize,
 }
 
 impl<S: Space> Wall<S> {
+    /// A new translation velocity from time `t` on; the wall stays where it is at `t`.
+    pub fn set_velocity(&mut self, velocity: S::V, t: f64) {
+        self.shift += (self.velocity - velocity) * t;
+        self.velocity = velocity;
+    }
+
     /// The corrected velocity of a node at `x` with velocity `v` at time `t`.
     #[inline]
     pub fn apply(&self, x: S::V, v: S::V, t: f64) -> S::V {
-        let x = x - self.velocity * t;
+        let x = x - self.shift - self.velocity * t;
         match self.geometry {
             Geometry::Plane { point, normal } => {
                 if (x - point).dot(normal) <= 0.0 {
@@ -108,6 +118,8 @@ mod tests {
             },
             contact,
             velocity: DVec2::ZERO,
+            shift: DVec2::ZERO,
+            id: 0,
         };
         let (below, v) = (DVec2::new(0.0, -0.01), DVec2::new(3.0, -1.0));
         assert_eq!(floor(Contact::Sticky).apply(below, v, 0.0), DVec2::ZERO);
@@ -131,7 +143,30 @@ mod tests {
             },
             contact: Contact::Slip,
             velocity: DVec2::ZERO,
+            shift: DVec2::ZERO,
+            id: 0,
         };
         assert_eq!(b.apply(DVec2::new(1.0, 0.5), DVec2::new(2.0, 1.0), 0.0), DVec2::new(0.0, 1.0));
+    }
+
+    #[test]
+    fn a_wall_whose_velocity_changes_stays_where_it_was() {
+        // Rising at 1 m/s, then at 3 m/s from t = 0.1 s: at t = 0.2 s it is at
+        // y = 0.1 + 3 × 0.1 = 0.4, so a node at rest at y = 0.35 is inside (pushed up at
+        // 3 m/s) and one at y = 0.45 is not.
+        let mut lift = Wall::<D2> {
+            geometry: Geometry::Plane {
+                point: DVec2::ZERO,
+                normal: DVec2::Y,
+            },
+            contact: Contact::Slip,
+            velocity: DVec2::new(0.0, 1.0),
+            shift: DVec2::ZERO,
+            id: 0,
+        };
+        lift.set_velocity(DVec2::new(0.0, 3.0), 0.1);
+        assert_eq!(lift.apply(DVec2::new(0.0, 0.35), DVec2::ZERO, 0.2), DVec2::new(0.0, 3.0));
+        assert_eq!(lift.apply(DVec2::new(0.0, 0.45), DVec2::ZERO, 0.2), DVec2::ZERO);
+        assert!((lift.shift.y + 0.2).abs() < 1e-15, "{}", lift.shift);
     }
 }

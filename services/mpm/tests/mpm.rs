@@ -247,6 +247,8 @@ fn sand_params_2d(grid: Grid, h: f64, model: Model) -> MpmParams<D2> {
             },
             contact: Contact::Friction(0.5),
             velocity: DVec2::ZERO,
+            shift: DVec2::ZERO,
+            id: 0,
         }],
     }
 }

@@ -9,7 +9,7 @@ use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
-use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary, set_gravity};
+use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary, set_component};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::time::Instant;
 
@@ -40,10 +40,17 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         // Snapshot and set act on the solvers' state: checked here, carried out by both
         // solvers before the next step.
         let mut forward = Ok(());
+        // The solvers read forwarded commands only at the next step begin: never more than
+        // the service holds, or the coupler would wait for them while they wait for it.
+        let mut forwarded = 0;
         let go_on = clock.obey(&session, step - 1, |c| {
             if !accepts(scene, c) {
                 return AckStatus::Unsupported;
             }
+            if forwarded == names::COMMAND.buffer {
+                return AckStatus::Busy;
+            }
+            forwarded += 1;
             let header = session.header(step - 1, 0.0, 0.0);
             let sent = command_pub.publish(1, |h, out| {
                 *h = header;
@@ -119,13 +126,22 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     Ok(())
 }
 
-/// Whether both solvers of this run can carry out a `snapshot` or `set` command.
+/// Whether both solvers of this run can carry out a `snapshot` or `set` command (a wall both
+/// solvers have: plane or box).
 fn accepts(scene: &Scene, c: &Control) -> bool {
+    use grains_protocol::scene::WallShape;
     match Command::from_code(c.command) {
         Some(Command::Snapshot) => true,
         Some(Command::Set) => Param::from_code(c.key).is_some_and(|p| {
             let (lo, hi, _) = p.range();
-            (lo..=hi).contains(&c.value) && set_gravity([0.0; 3], scene.dim(), p, c.value).is_ok()
+            let exists = match p {
+                Param::Gravity { .. } => true,
+                Param::WallVelocity { wall, .. } => scene
+                    .walls
+                    .get(wall)
+                    .is_some_and(|w| matches!(w.shape, WallShape::Plane { .. } | WallShape::Box { .. })),
+            };
+            (lo..=hi).contains(&c.value) && exists && set_component([0.0; 3], scene.dim(), p, c.value).is_ok()
         }),
         _ => false,
     }

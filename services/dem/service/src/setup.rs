@@ -173,10 +173,11 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
             next_id += 1;
         }
     }
-    for w in &scene.walls {
+    for (id, w) in scene.walls.iter().enumerate() {
         let mut add = |mut wall: Wall<S>| {
             wall.velocity = S::from_array(w.velocity);
             wall.spin = w.spin;
+            wall.id = id;
             state.walls.push(wall);
         };
         match w.shape {

@@ -9,7 +9,7 @@ use grains_dem::state::{DemState, WallShape};
 use grains_grid::{Grid, Kernel};
 use grains_protocol::scene::{GrainTransfer, Scene};
 use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
-use grains_service::solver::{Solver, SolverReport, StepWindow, set_gravity, view_stride};
+use grains_service::solver::{Solver, SolverReport, StepWindow, set_component, view_stride};
 use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
@@ -227,10 +227,20 @@ impl<S: Space> Solver for DemSolver<S> {
                 }
                 Ok(())
             }
-            (Some(Command::Set), Some(p)) => {
-                let g = set_gravity(S::to_array(self.state.params.gravity), S::DIM, p, c.value)?;
+            (Some(Command::Set), Some(p @ Param::Gravity { .. })) => {
+                let g = set_component(S::to_array(self.state.params.gravity), S::DIM, p, c.value)?;
                 self.state.params.gravity = S::from_array(g);
                 Ok(())
+            }
+            (Some(Command::Set), Some(p @ Param::WallVelocity { wall, .. })) => {
+                let mut found = false;
+                for w in self.state.walls.iter_mut().filter(|w| w.id == wall) {
+                    w.velocity = S::from_array(set_component(S::to_array(w.velocity), S::DIM, p, c.value)?);
+                    found = true;
+                }
+                found
+                    .then_some(())
+                    .ok_or_else(|| format!("{}: the scene has no wall {wall}", p.name()))
             }
             _ => Err(format!("command {} (key {}) is not one the DEM takes", c.command, c.key)),
         }

@@ -155,7 +155,8 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
     let walls = scene
         .walls
         .iter()
-        .filter_map(|w| {
+        .enumerate()
+        .filter_map(|(id, w)| {
             let geometry = match w.shape {
                 WallShape::Plane { point, normal } => Geometry::Plane {
                     point: vec::<S>(point),
@@ -178,6 +179,8 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
                 geometry,
                 contact,
                 velocity: vec::<S>(w.velocity),
+                shift: S::V::default(),
+                id,
             })
         })
         .collect();

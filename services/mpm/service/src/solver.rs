@@ -8,7 +8,7 @@ use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline};
 use grains_mpm::points::{Points, totals};
 use grains_protocol::scene::Scene;
 use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
-use grains_service::solver::{Solver, SolverReport, StepWindow, set_gravity, view_stride};
+use grains_service::solver::{Solver, SolverReport, StepWindow, set_component, view_stride};
 use grains_service::vtu::{Field, PointFrames, Values};
 
 pub struct MpmSolver<S: MpmSpace> {
@@ -216,9 +216,21 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
                 }
                 Ok(())
             }
-            (Some(Command::Set), Some(p)) => {
-                let g = set_gravity(S::to_array(self.params.gravity), S::DIM, p, c.value)?;
+            (Some(Command::Set), Some(p @ Param::Gravity { .. })) => {
+                let g = set_component(S::to_array(self.params.gravity), S::DIM, p, c.value)?;
                 self.params.gravity = S::from_array(g);
+                Ok(())
+            }
+            (Some(Command::Set), Some(p @ Param::WallVelocity { wall, .. })) => {
+                let time = self.pipeline.time;
+                let w = self.params.walls.iter_mut().find(|w| w.id == wall).ok_or_else(|| {
+                    format!(
+                        "{}: the MPM has no wall {wall} (drum and segment walls act on grains only)",
+                        p.name()
+                    )
+                })?;
+                let v = set_component(S::to_array(w.velocity), S::DIM, p, c.value)?;
+                w.set_velocity(S::from_array(v), time);
                 Ok(())
             }
             _ => Err(format!("command {} (key {}) is not one the MPM takes", c.command, c.key)),
