@@ -374,6 +374,16 @@ fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
         .expect("an answer")
         .expect("snapshot");
     let s = a["step"].as_u64().unwrap();
+    // Paused, the coupler forwards 16 commands (what the solvers' queue holds until the next
+    // step) and refuses the 17th as busy instead of waiting for the solvers for ever.
+    steer(&ep, &run, br#"{"command":"pause"}"#).expect("an answer").expect("pause");
+    for k in 0..16 {
+        let r = steer(&ep, &run, br#"{"command":"set","key":"gravity.y","value":-9.81}"#).expect("an answer");
+        assert!(r.is_ok(), "set {k} while paused: {r:?}");
+    }
+    let busy = steer(&ep, &run, br#"{"command":"snapshot"}"#).expect("an answer");
+    assert!(busy.as_ref().is_err_and(|e| e.contains("too many commands")), "{busy:?}");
+    steer(&ep, &run, br#"{"command":"resume"}"#).expect("an answer").expect("resume");
     steer(&ep, &run, br#"{"command":"stop"}"#).expect("an answer").expect("stop");
     assert!(launcher.wait_exit(Duration::from_secs(30)).success(), "{}", launcher.stderr());
     for solver in ["grains", "points"] {
