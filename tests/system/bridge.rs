@@ -260,6 +260,16 @@ fn access_control_lets_in_only_the_listed_users() {
             "{who}: the bridge must refuse the connection"
         );
     }
+    // A reader cannot publish to the other clients: a steerer listening to the summaries
+    // gets real ones and none of the reader's fakes (tests/python/reader_injects.py).
+    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
+    let inject = std::process::Command::new(&python)
+        .arg(repo().join("tests/python/reader_injects.py"))
+        .args([connect.as_str(), run.as_str(), "viewer:look", "pilot:fly"])
+        .output()
+        .unwrap_or_else(|e| panic!("cannot start {python}: {e}"));
+    let said = String::from_utf8_lossy(&inject.stdout).into_owned() + &String::from_utf8_lossy(&inject.stderr);
+    assert!(inject.status.success(), "{said}");
     // The reader's stop is dropped by the access control: no answer, and the run goes on.
     assert!(
         steer(&viewer, &run, br#"{"command":"stop"}"#).is_err(),
