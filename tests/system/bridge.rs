@@ -57,6 +57,14 @@ fn wait_reachable(ep: &Endpoint, run: &str, launcher: &Running) -> u64 {
     }
 }
 
+/// One of the Python clients in `tests/python/` (with `GRAINS_PYTHON`, default `python3`).
+fn python(script: &str, args: &[&str]) -> std::process::Command {
+    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
+    let mut cmd = std::process::Command::new(python);
+    cmd.arg(repo().join("tests/python").join(script)).args(args);
+    cmd
+}
+
 fn bridge_pid(stderr: &str) -> i32 {
     let line = stderr.lines().find(|l| l.contains("started the bridge")).expect("bridge line");
     let at = line.find("grains-bridge (pid ").expect("bridge pid") + "grains-bridge (pid ".len();
@@ -71,12 +79,9 @@ fn a_python_client_watches_pauses_resumes_and_stops_a_run() {
     let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", FOREVER, "--set", NO_FRAMES]);
     wait_reachable(&endpoint(&connect, None), &run, &launcher);
 
-    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
-    let client = std::process::Command::new(&python)
-        .arg(repo().join("tests/python/bridge_client.py"))
-        .args([&connect, &run])
+    let client = python("bridge_client.py", &[&connect, &run])
         .output()
-        .unwrap_or_else(|e| panic!("cannot start {python}: {e}"));
+        .unwrap_or_else(|e| panic!("cannot start Python: {e}"));
     let said = String::from_utf8_lossy(&client.stdout).into_owned();
     assert!(
         client.status.success(),
@@ -262,12 +267,9 @@ fn access_control_lets_in_only_the_listed_users() {
     }
     // A reader cannot publish to the other clients: a steerer listening to the summaries
     // gets real ones and none of the reader's fakes (tests/python/reader_injects.py).
-    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
-    let inject = std::process::Command::new(&python)
-        .arg(repo().join("tests/python/reader_injects.py"))
-        .args([connect.as_str(), run.as_str(), "viewer:look", "pilot:fly"])
+    let inject = python("reader_injects.py", &[&connect, &run, "viewer:look", "pilot:fly"])
         .output()
-        .unwrap_or_else(|e| panic!("cannot start {python}: {e}"));
+        .unwrap_or_else(|e| panic!("cannot start Python: {e}"));
     let said = String::from_utf8_lossy(&inject.stdout).into_owned() + &String::from_utf8_lossy(&inject.stderr);
     assert!(inject.status.success(), "{said}");
     // The reader's stop is dropped by the access control: no answer, and the run goes on.
@@ -414,7 +416,6 @@ fn a_client_that_never_reads_views_does_not_slow_the_run() {
     use std::io::BufRead;
     let _machine = machine();
     let out = out_dir("bridge-slow");
-    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
     let wall = |stalled: bool| -> f64 {
         let connect = free_endpoint();
         // 4,824 grains: every view (all of them, 5 a second, ~340 kB of JSON) soon fills what
@@ -436,12 +437,10 @@ fn a_client_that_never_reads_views_does_not_slow_the_run() {
         let (mut launcher, run, dir) = bridged(&out, &connect, &big);
         wait_reachable(&endpoint(&connect, None), &run, &launcher);
         let viewer = stalled.then(|| {
-            let mut child = std::process::Command::new(&python)
-                .arg(repo().join("tests/python/stalled_viewer.py"))
-                .args([&connect, &run])
+            let mut child = python("stalled_viewer.py", &[&connect, &run])
                 .stdout(std::process::Stdio::piped())
                 .spawn()
-                .unwrap_or_else(|e| panic!("cannot start {python}: {e}"));
+                .unwrap_or_else(|e| panic!("cannot start Python: {e}"));
             let mut line = String::new();
             let stdout = child.stdout.take().expect("piped");
             std::io::BufReader::new(stdout).read_line(&mut line).expect("viewer output");

@@ -212,7 +212,8 @@ impl<S: Space> Solver for DemSolver<S> {
         g.len() as u64
     }
 
-    /// `snapshot`: a frame of the grains now (`frames/`); `set gravity.*`.
+    /// `snapshot`: a frame of the grains now (`frames/`); `set gravity.*` and
+    /// `set wall.K.velocity.*`.
     fn command(&mut self, done: u64, c: &Control) -> Result<(), String> {
         match (Command::from_code(c.command), Param::from_code(c.key)) {
             (Some(Command::Snapshot), _) => {
