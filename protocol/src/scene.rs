@@ -241,14 +241,16 @@ pub struct Coupling {
 /// How a hybrid grain takes the coupler's node velocities back (Yue 2018 Alg. 5–6).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GrainTransfer {
-    /// Alg. 5–6 as written (the default): the grain's velocity becomes the interpolated node
+    /// Alg. 5–6 as written: the grain's velocity becomes the interpolated node
     /// velocity (spin: half the curl) and it moves from its saved position with it. The band's
     /// grains move affinely with the grid: they stay put at rest, but cannot rearrange, and
     /// the band holds faces a granular material would not.
     Pic,
-    /// The grain keeps its substepped velocity and position and adds the coupling's change of
-    /// the node velocities interpolated to it (times dt / 2 for the position): grains of the
-    /// band can rearrange, but nothing keeps them from drifting into the continuum at rest.
+    /// The default. The grain keeps its substepped velocity and position and adds the coupling's change of
+    /// the node velocities interpolated to it (times dt / 2 for the position); its spin is the
+    /// material's. The substeps carry the last step's coupling force of the nodes around each
+    /// grain, so the coupling acts with the contacts rather than as a kick after them: band
+    /// grains rearrange (the band flows like the DEM) and a resting band stays at rest.
     Flip,
 }
 
@@ -1095,7 +1097,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             weight: 0.5,
             discrete_layer: band_default,
             hybrid_band: band_default,
-            grain_transfer: GrainTransfer::Pic,
+            grain_transfer: GrainTransfer::Flip,
         },
         Some(c) => Coupling {
             substeps: match &c.substeps {
@@ -1122,8 +1124,8 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 Some(t) => in_range(ctx, t, "coupling.hybrid_band", Open(0.0), Bound::None)?,
             },
             grain_transfer: match c.grain_transfer.as_ref().map(|t| (t, t.get_ref().as_str())) {
-                None | Some((_, "pic")) => GrainTransfer::Pic,
-                Some((_, "flip")) => GrainTransfer::Flip,
+                Some((_, "pic")) => GrainTransfer::Pic,
+                None | Some((_, "flip")) => GrainTransfer::Flip,
                 Some((t, other)) => {
                     return Err(ctx.err(
                         Some(t.span()),

@@ -521,38 +521,46 @@ fn the_coupling_step_conserves_momentum_between_the_real_solvers() {
     assert!(shared_total > 20 * 10, "the band must couple nodes every step ({shared_total})");
 }
 
-/// With `grain_transfer = "flip"` the grains take exactly the momentum the coupler gave the
-/// DEM: their summed momentum changes in `finish` by Σ (m_d v − p_d) over the shared nodes, to
-/// round-off (the MPM's weights sum to one at every grain, so rasterizing the masses and
-/// interpolating the velocity changes are adjoint).
+/// With `grain_transfer = "flip"` (the default) the coupled system conserves its total momentum
+/// over whole steps, to round-off: the push the DEM carries through its substeps (the last
+/// step's coupling force) is taken out of the raster the coupler sees, and the grains take
+/// exactly the momentum the coupler gives the DEM (the MPM's weights sum to one at every grain,
+/// so rasterizing masses and interpolating velocity changes are adjoint). A block without
+/// gravity or walls, its grains given velocities that disagree with the points', so that the
+/// coupler works every step. Sending the raster with the push left in gains momentum (checked
+/// once by hand: 2.8e-5 kg m/s at step 2, 4e-4 of the scale here).
 #[test]
-fn flip_grains_take_exactly_the_coupling_momentum() {
+fn flip_coupling_conserves_momentum_over_whole_steps() {
     use grains_service::solver::Solver;
-    let mut h = Hybrid::load_with("tests/scenes/hybrid_small_2d.toml", |s| {
-        s.coupling.grain_transfer = grains_protocol::scene::GrainTransfer::Flip;
-    });
-    for step in 1..=20 {
+    let mut h = Hybrid::load("tests/scenes/hybrid_block_2d.toml");
+    assert_eq!(h.scene.coupling.grain_transfer, grains_protocol::scene::GrainTransfer::Flip);
+    let g = &mut h.dem.state.grains;
+    for i in 0..g.len() {
+        let t = i as f64 * 0.618_033_988_7 % 1.0;
+        g.v[i] += glam::DVec2::new(0.2 * (t - 0.5), 0.1 * ((7.3 * t) % 1.0 - 0.5));
+    }
+    let total = |h: &Hybrid| {
+        let (d, m) = (h.dem.report(), h.mpm.report());
+        [d.momentum[0] + m.momentum[0], d.momentum[1] + m.momentum[1]]
+    };
+    let before = total(&h);
+    let scale = (h.dem.report().mass + h.mpm.report().mass) * 0.1;
+    let mut pushed = 0.0;
+    for step in 1..=50 {
         let x = h.exchange(step);
-        let before = h.dem.report().momentum;
-        let mut given = [0.0; 3];
-        for v in &x.velocities {
-            let d = x.dem.iter().find(|n| n.node == v.node).unwrap();
-            for (c, g) in given.iter_mut().enumerate() {
-                *g += d.mass * v.velocity[c] - d.momentum[c];
-            }
-        }
+        assert!(!x.velocities.is_empty());
+        pushed += h.dem.state.grains.external.iter().map(|f| f.length()).sum::<f64>();
         h.finish(step, &x);
-        let after = h.dem.report().momentum;
-        let scale: f64 = x.dem.iter().map(|n| n.momentum.iter().map(|p| p.abs()).sum::<f64>()).sum();
-        for c in 0..3 {
+        let now = total(&h);
+        for c in 0..2 {
             assert!(
-                (after[c] - before[c] - given[c]).abs() <= 1e-12 * scale,
-                "step {step}, component {c}: the grains gained {} kg m/s, the coupler gave {}",
-                after[c] - before[c],
-                given[c]
+                (now[c] - before[c]).abs() <= 1e-12 * scale,
+                "step {step}, component {c}: {} kg m/s gained (scale {scale})",
+                now[c] - before[c]
             );
         }
     }
+    assert!(pushed > 0.0, "the substeps must carry a coupling force");
 }
 
 /// A hybrid block translating without gravity keeps its shape (issue 5): over 0.5 s every grain
@@ -595,10 +603,13 @@ fn a_translating_hybrid_block_keeps_its_shape() {
     );
 }
 
-/// A hybrid layer at rest under gravity stays at rest (issue 5): once it has settled (0.3 s) its
+/// A hybrid layer at rest under gravity stays at rest (issue 5): once it has settled (0.4 s) its
 /// kinetic energy is under a tenth of its peak and under 1e-6 of m g d (the work of lowering
 /// all of it by one grain diameter), and over the next 0.5 s its free surface (the top of the
-/// grains, column by column) moves by less than 0.1 grain diameter.
+/// grains, column by column) moves by less than 0.1 grain diameter. With the default "flip"
+/// transfer (measured, seeds 0, 2, 3, 4: 0.066, 0.061, 0.062, 0.022 d; kinetic energy after
+/// 0.4 s at most 1.6e-9 J). Kicking the grains with the coupling after the substeps instead of
+/// pushing them through them fails it (0.23 d).
 #[test]
 fn a_hybrid_layer_at_rest_stays_at_rest() {
     use grains_service::solver::Solver;
@@ -613,7 +624,7 @@ fn a_hybrid_layer_at_rest_stays_at_rest() {
         top
     };
     let dt = h.scene.dt;
-    let (settled, end) = ((0.3 / dt).round() as u64, (0.8 / dt).round() as u64);
+    let (settled, end) = ((0.4 / dt).round() as u64, (0.9 / dt).round() as u64);
     let mut peak: f64 = 0.0;
     let mut at_rest = None;
     let m_g_d = (h.dem.report().mass + h.mpm.report().mass) * 9.81 * 1e-3;
