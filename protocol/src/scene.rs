@@ -241,16 +241,17 @@ pub struct Coupling {
 /// How a hybrid grain takes the coupler's node velocities back (Yue 2018 Alg. 5–6).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GrainTransfer {
-    /// Alg. 5–6 as written: the grain's velocity becomes the interpolated node
-    /// velocity (spin: half the curl) and it moves from its saved position with it. The band's
-    /// grains move affinely with the grid: they stay put at rest, but cannot rearrange, and
-    /// the band holds faces a granular material would not.
+    /// Alg. 5–6 as written: the grain's velocity becomes the interpolated node velocity (spin:
+    /// half the curl) and it moves from its saved position with it. The band's grains move
+    /// affinely with the grid: they stay put at rest, but cannot rearrange, and the band holds
+    /// faces a granular material would not.
     Pic,
-    /// The default. The grain keeps its substepped velocity and position and adds the coupling's change of
-    /// the node velocities interpolated to it (times dt / 2 for the position); its spin is the
-    /// material's. The substeps carry the last step's coupling force of the nodes around each
-    /// grain, so the coupling acts with the contacts rather than as a kick after them: band
-    /// grains rearrange (the band flows like the DEM) and a resting band stays at rest.
+    /// The default. The grain keeps its substepped velocity and position and adds the
+    /// coupling's change of the node velocities interpolated to it (times dt / 2 for the
+    /// position); its spin is the material's. The substeps carry the last step's coupling
+    /// force of the nodes around each grain, so the coupling acts with the contacts rather than
+    /// as a kick after them: a resting band stays at rest and the band flows, though short
+    /// columns stop early (`docs/validate/column_collapse.md`).
     Flip,
 }
 

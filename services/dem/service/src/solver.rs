@@ -84,6 +84,11 @@ impl<S: Space> DemSolver<S> {
         Ok(solver)
     }
 
+    /// Node `k` of the raster without the impulse of the carried coupling push.
+    fn uncoupled_momentum(&self, k: usize) -> S::V {
+        self.raster[k].momentum - self.carried.get(k).copied().unwrap_or_default()
+    }
+
     /// NaN and runaway energy, with the step and the likely cause.
     fn check(&self, step: u64, dt: f64) -> anyhow::Result<()> {
         if let Some(id) = DemPipeline::first_non_finite(&self.state) {
@@ -184,22 +189,21 @@ impl<S: Space> Solver for DemSolver<S> {
     /// without any coupling, which is what the coupler's eq. 31 needs.
     fn write_raster(&mut self, _window: &StepWindow, out: &mut [RasterNode]) {
         for (k, (o, r)) in out.iter_mut().zip(&self.raster).enumerate() {
-            let carried = self.carried.get(k).copied().unwrap_or_default();
             *o = RasterNode {
                 node: r.node,
                 mass: r.mass,
-                momentum: S::to_array(r.momentum - carried),
+                momentum: S::to_array(self.uncoupled_momentum(k)),
             };
         }
     }
 
     /// Alg. 5 and 6. With `grain_transfer = "flip"` every hybrid grain adds to its substepped
     /// velocity the coupling's change of the node velocities (constrained minus its own
-    /// raster's, zero on nodes the coupler left alone) interpolated at its saved position,
-    /// moves by that change times dt / 2 and takes the spin of the constrained field; each
-    /// node's whole coupling acceleration (constrained velocity minus the velocity without any
-    /// coupling, over dt) is kept for the next step's substeps. With `"pic"` (Alg. 5–6 as written) it takes the velocity
-    /// interpolated from the coupler's node velocities (its own raster's elsewhere) and the spin
+    /// raster's; on nodes the coupler left alone, its uncoupled minus its own: the push is
+    /// taken back) interpolated at its saved position, moves by that change times dt / 2 and
+    /// takes the spin of the constrained field; each node's whole coupling acceleration
+    /// (constrained velocity minus the uncoupled one, over dt) is kept for the next step's
+    /// substeps. With `"pic"` (Alg. 5–6 as written) it takes the velocity interpolated from the coupler's node velocities (its own raster's elsewhere) and the spin
     /// of that field, and moves from its saved position with that velocity. The other grains
     /// keep their substepped state.
     fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()> {
@@ -213,12 +217,7 @@ impl<S: Space> Solver for DemSolver<S> {
                 .raster
                 .iter()
                 .enumerate()
-                .map(|(k, r)| {
-                    (
-                        r.node,
-                        (r.momentum - self.carried.get(k).copied().unwrap_or_default()) * (1.0 / r.mass),
-                    )
-                })
+                .map(|(k, r)| (r.node, self.uncoupled_momentum(k) * (1.0 / r.mass)))
                 .collect();
             if flip {
                 // The whole coupling acceleration of each node: its constrained velocity minus
