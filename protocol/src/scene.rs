@@ -236,6 +236,14 @@ pub struct Coupling {
     pub hybrid_band: f64,
     /// How a hybrid grain takes the constrained velocities back.
     pub grain_transfer: GrainTransfer,
+    /// With `"flip"`: the inertial number γ̇ √(d / |g|) of the material around a band grain
+    /// (γ̇ its shear rate, d the grain's diameter) below which the grain turns with the
+    /// material; above it the grain keeps its own spin and rolls. GDR MiDi (2004) put the
+    /// quasi-static regime of dense flows at I < 1e-3; √(d / |g|) takes the pressure under one
+    /// grain layer, so deeper in the band the true inertial number is smaller and grains start
+    /// rolling at a smaller one (early rather than late). 0 never turns
+    /// the grains (Yue 2018 couples translation only); without gravity they always roll.
+    pub quasi_static: f64,
 }
 
 /// How a hybrid grain takes the coupler's node velocities back (Yue 2018 Alg. 5–6).
@@ -248,10 +256,11 @@ pub enum GrainTransfer {
     Pic,
     /// The default. The grain keeps its substepped velocity and position and adds the
     /// coupling's change of the node velocities interpolated to it (times dt / 2 for the
-    /// position); its spin is the material's. The substeps carry the last step's coupling
-    /// force of the nodes around each grain, so the coupling acts with the contacts rather than
-    /// as a kick after them: a resting band stays at rest and the band flows, though short
-    /// columns stop early (`docs/validate/column_collapse.md`).
+    /// position); where the material is quasi-static (`quasi_static`) its spin is the
+    /// material's, elsewhere its own. The substeps carry the last step's coupling force of the
+    /// nodes around each grain, so the coupling acts with the contacts rather than as a kick
+    /// after them: a resting band stays at rest and a flowing band rolls
+    /// (`docs/validate/column_collapse.md`).
     Flip,
 }
 
@@ -1099,6 +1108,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             discrete_layer: band_default,
             hybrid_band: band_default,
             grain_transfer: GrainTransfer::Flip,
+            quasi_static: 1e-3,
         },
         Some(c) => Coupling {
             substeps: match &c.substeps {
@@ -1134,6 +1144,10 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                         format!("must be \"flip\" or \"pic\", got {other:?}"),
                     ));
                 }
+            },
+            quasi_static: match &c.quasi_static {
+                None => 1e-3,
+                Some(i) => in_range(ctx, i, "coupling.quasi_static", Closed(0.0), Bound::None)?,
             },
         },
     };
@@ -1503,6 +1517,7 @@ pub mod raw {
         pub discrete_layer: Option<Spanned<f64>>,
         pub hybrid_band: Option<Spanned<f64>>,
         pub grain_transfer: Option<Spanned<String>>,
+        pub quasi_static: Option<Spanned<f64>>,
     }
 
     #[derive(Deserialize)]
@@ -1600,6 +1615,13 @@ mpm_nodes = 50
             Some(14),
             "synthetic.participants",
             "allowed sets",
+        );
+        let line = GOOD.lines().count() + 2;
+        check_err(
+            &format!("{GOOD}[coupling]\nquasi_static = -1e-3\n"),
+            Some(line),
+            "coupling.quasi_static",
+            ">= 0",
         );
     }
 

@@ -4,11 +4,12 @@
 //!   reconciliation zone onto the MPM grid, with the MPM's own shape functions, by node index;
 //! - [`interpolate`] (Alg. 5): a grain's velocity from node velocities (the coupler's where it
 //!   constrained a node, the DEM's own raster velocity elsewhere), with the same weights, and
-//!   its spin: half the curl of the interpolated velocity field. Yue 2018 couples translation
-//!   only; a hybrid grain whose rotation were left to its contacts would be spun up without
-//!   end, since every macro-step moves it back to where the coupling puts it while its
-//!   contacts' tangential springs keep the sliding of the substeps (measured: 50 rad/s in a
-//!   resting layer after 0.8 s). So it turns with the material around it.
+//!   the field's [`Gradient`]: its spin ½ ∇ × v and its shear rate. Yue 2018 couples
+//!   translation only; a hybrid grain whose rotation were left to its contacts would be spun up
+//!   without end in a resting band, since every macro-step moves it back to where the coupling
+//!   puts it while its contacts' tangential springs keep the sliding of the substeps
+//!   (measured: 50 rad/s in a resting layer after 0.8 s). So where the material is
+//!   quasi-static a band grain turns with it; where it flows the solver lets it roll.
 //!
 //! Advection from the saved positions (Alg. 6) is `x = x_saved + dt v` in the solver.
 
@@ -50,13 +51,38 @@ pub fn rasterize<S: Space>(
         .collect()
 }
 
-/// Alg. 5: the velocity at `x` interpolated from node velocities, and the spin ½ ∇ × v there;
-/// `velocity(node)` gives a node's velocity (`None` for a node that carries no grain mass,
-/// which gets no weight: the weights of the nodes that do are renormalized so that a uniform
-/// field is kept exactly).
-pub fn interpolate<S: Space>(grid: &Grid, kernel: Kernel, x: S::V, velocity: impl Fn(u64) -> Option<S::V>) -> (S::V, S::Ang) {
+/// The gradient L[a][b] = ∂v_a/∂x_b of an interpolated velocity field (zero rows and columns
+/// beyond the space's dimension).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Gradient(pub [[f64; 3]; 3]);
+
+impl Gradient {
+    /// The spin ½ ∇ × v.
+    pub fn spin<S: Space>(&self) -> S::Ang {
+        let l = &self.0;
+        S::ang_from_array([0.5 * (l[2][1] - l[1][2]), 0.5 * (l[0][2] - l[2][0]), 0.5 * (l[1][0] - l[0][1])])
+    }
+
+    /// The shear rate √(2 D′:D′), D′ the deviatoric part of the strain rate (of the space's
+    /// `dim` dimensions): γ̇ of a simple shear v_x = γ̇ y.
+    pub fn shear_rate(&self, dim: usize) -> f64 {
+        let l = &self.0;
+        let mean = (0..dim).map(|a| l[a][a]).sum::<f64>() / dim as f64;
+        let pairs = (0..dim).flat_map(|a| (0..dim).map(move |b| (a, b)));
+        let dd: f64 = pairs
+            .map(|(a, b)| 0.5 * (l[a][b] + l[b][a]) - if a == b { mean } else { 0.0 })
+            .map(|d| d * d)
+            .sum();
+        (2.0 * dd).sqrt()
+    }
+}
+
+/// Alg. 5: the velocity at `x` interpolated from node velocities, and its gradient there (for
+/// the spin ½ ∇ × v and the shear rate); `velocity(node)` gives a node's velocity (`None` for a
+/// node that carries no grain mass, which gets no weight: the weights of the nodes that do are
+/// renormalized so that a uniform field is kept exactly).
+pub fn interpolate<S: Space>(grid: &Grid, kernel: Kernel, x: S::V, velocity: impl Fn(u64) -> Option<S::V>) -> (S::V, Gradient) {
     let (mut v, mut total) = (S::V::default(), 0.0);
-    // L[a][b] = ∂v_a/∂x_b.
     let mut l = [[0.0; 3]; 3];
     for_each_node::<S>(grid, kernel, x, |node, w, grad| {
         if w > 0.0
@@ -72,8 +98,7 @@ pub fn interpolate<S: Space>(grid: &Grid, kernel: Kernel, x: S::V, velocity: imp
             }
         }
     });
-    let spin = S::ang_from_array([0.5 * (l[2][1] - l[1][2]), 0.5 * (l[0][2] - l[2][0]), 0.5 * (l[1][0] - l[0][1])]);
-    (if total > 0.0 { v * (1.0 / total) } else { v }, spin)
+    (if total > 0.0 { v * (1.0 / total) } else { v }, Gradient(l))
 }
 
 #[cfg(test)]
@@ -129,23 +154,36 @@ mod tests {
         for k in 0..100 {
             let t = k as f64 * 0.618_033_988_7 % 1.0;
             let x = DVec2::new(0.2 + 0.6 * t, 0.2 + 0.6 * ((3.7 * t) % 1.0));
-            let (v, spin) = interpolate::<D2>(&grid, kernel, x, |_| Some(u));
-            assert!((v - u).length() < 1e-14 && spin.abs() < 1e-12);
+            let (v, grad) = interpolate::<D2>(&grid, kernel, x, |_| Some(u));
+            assert!((v - u).length() < 1e-14 && grad.spin::<D2>().abs() < 1e-12 && grad.shear_rate(2) < 1e-12);
             let (half, _) = interpolate::<D2>(&grid, kernel, x, |n| (n % 2 == 0).then_some(u));
             assert!((half - u).length() < 1e-14);
-            let (linear, spin) = interpolate::<D2>(&grid, kernel, x, |n| Some(at(n) * 2.0));
+            let (linear, grad) = interpolate::<D2>(&grid, kernel, x, |n| Some(at(n) * 2.0));
             assert!((linear - x * 2.0).length() < 1e-12, "{linear:?} vs {:?}", x * 2.0);
-            assert!(spin.abs() < 1e-10, "a pure stretch has no spin: {spin}");
+            let (spin, rate) = (grad.spin::<D2>(), grad.shear_rate(2));
+            assert!(
+                spin.abs() < 1e-10 && rate < 1e-10,
+                "an isotropic stretch has no spin ({spin}) and no shear ({rate})"
+            );
             // A rigid rotation at ω about (0.5, 0.5): v = ω × r, spin ω (the weights reproduce
             // linear fields and their gradients).
             let omega = 3.0;
-            let (rot, spin) = interpolate::<D2>(&grid, kernel, x, |n| {
+            let (rot, grad) = interpolate::<D2>(&grid, kernel, x, |n| {
                 let r = at(n) - DVec2::splat(0.5);
                 Some(DVec2::new(-omega * r.y, omega * r.x))
             });
             let r = x - DVec2::splat(0.5);
             assert!((rot - DVec2::new(-omega * r.y, omega * r.x)).length() < 1e-12);
-            assert!((spin - omega).abs() < 1e-9, "spin {spin} vs {omega}");
+            let (spin, rate) = (grad.spin::<D2>(), grad.shear_rate(2));
+            assert!((spin - omega).abs() < 1e-9 && rate < 1e-9, "spin {spin} vs {omega}, shear {rate}");
+            // A simple shear v_x = γ̇ y: shear rate γ̇, spin −γ̇/2.
+            let shear = 4.0;
+            let (_, grad) = interpolate::<D2>(&grid, kernel, x, |n| Some(DVec2::new(shear * at(n).y, 0.0)));
+            let (spin, rate) = (grad.spin::<D2>(), grad.shear_rate(2));
+            assert!(
+                (rate - shear).abs() < 1e-9 && (spin + 0.5 * shear).abs() < 1e-9,
+                "shear {rate}, spin {spin}"
+            );
         }
     }
 }

@@ -38,6 +38,10 @@ pub struct DemSolver<S: Space> {
     carried: Vec<S::V>,
     /// With `"flip"`: each constrained node's coupling acceleration of the last step [m/s²].
     accel: HashMap<u64, S::V>,
+    /// With `"flip"`: the inertial number below which a band grain turns with the material,
+    /// and |g| [m/s²].
+    quasi_static: f64,
+    gravity: f64,
 }
 
 impl<S: Space> DemSolver<S> {
@@ -77,6 +81,8 @@ impl<S: Space> DemSolver<S> {
             raster: Vec::new(),
             carried: Vec::new(),
             accel: HashMap::new(),
+            quasi_static: scene.coupling.quasi_static,
+            gravity: S::from_array(scene.gravity).length(),
         };
         if let Some((f, _)) = &mut solver.frames {
             f.write(0, &solver.state, &solver.pipeline)?;
@@ -239,19 +245,26 @@ impl<S: Space> Solver for DemSolver<S> {
                 if let Some(&x0) = self.hybrid.get(&g.id[i]) {
                     if flip {
                         // The rest of the coupling force, spread evenly over the step, changes
-                        // the velocity by dv and the position by dv dt / 2. The grain turns with
-                        // the material around it, as with "pic": its spin is not coupled
-                        // otherwise, and a band grain held up by the coupling is spun up by the
-                        // sliding of its contacts (measured: 35 rad/s in a resting layer).
+                        // the velocity by dv and the position by dv dt / 2.
                         let (dv, _) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, change);
-                        let (_, spin) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
                         g.v[i] += dv;
                         g.x[i] += dv * (0.5 * window.dt);
-                        g.omega[i] = spin;
+                        // Its spin is not coupled otherwise: where the material is
+                        // quasi-static the grain turns with it (held up by the coupling, it
+                        // would be spun up by the sliding of its contacts: 35 rad/s in a
+                        // resting layer, which creeps 0.3 d in 0.5 s); where it flows the grain
+                        // rolls (turning with the material there, a = 0.5 columns stop at
+                        // 2/3 of the DEM's runout). I² = γ̇² d / |g| < I_c², without a division.
+                        let (_, grad) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
+                        let rate = grad.shear_rate(S::DIM);
+                        let d = 2.0 * g.radius[i];
+                        if rate * rate * d < self.quasi_static * self.quasi_static * self.gravity {
+                            g.omega[i] = grad.spin::<S>();
+                        }
                     } else {
-                        let (v, spin) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
+                        let (v, grad) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
                         g.v[i] = v;
-                        g.omega[i] = spin;
+                        g.omega[i] = grad.spin::<S>();
                         g.x[i] = x0 + v * window.dt;
                     }
                 }
