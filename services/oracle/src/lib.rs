@@ -5,9 +5,12 @@
 //! - [`packing_fraction`]: the share of each cell covered by the discrete grains;
 //! - [`distance_to_level`]: the signed distance to the isocontour of a cell field at a level
 //!   (positive on the side above it: inside the dense material), by fast sweeping;
-//! - [`zone_of_distance`]: continuum, hybrid or discrete from that distance, `φ0` and `r_h`.
+//! - [`zone_of_distance`]: continuum, hybrid or discrete from that distance, `φ0` and `r_h`;
+//! - [`enrichment`]: the state of new grains (Alg. 10).
 
 use grains_grid::Grid;
+
+pub mod enrichment;
 
 /// Where a cell lies relative to the reconciliation zone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
