@@ -6,7 +6,8 @@
 //! - [`distance_to_level`]: the signed distance to the isocontour of a cell field at a level
 //!   (positive on the side above it: inside the dense material), by fast sweeping;
 //! - [`zone_of_distance`]: continuum, hybrid or discrete from that distance, `φ0` and `r_h`;
-//! - [`enrichment`]: the state of new grains (Alg. 10).
+//! - [`enrichment`]: where new grains go (Poisson-disk growth from the grains there) and their
+//!   velocity (Alg. 10).
 
 use grains_grid::Grid;
 
