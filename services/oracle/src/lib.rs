@@ -7,11 +7,13 @@
 //!   (positive on the side above it: inside the dense material), by fast sweeping;
 //! - [`zone_of_distance`]: continuum, hybrid or discrete from that distance, `φ0` and `r_h`;
 //! - [`enrichment`]: where new grains go (Poisson-disk growth from the grains there) and their
-//!   velocity (Alg. 10).
+//!   velocity (Alg. 10);
+//! - [`homogenize`]: the grains' stress on the MPM grid (Alg. 11).
 
 use grains_grid::Grid;
 
 pub mod enrichment;
+pub mod homogenize;
 
 /// Where a cell lies relative to the reconciliation zone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
