@@ -563,6 +563,47 @@ fn flip_coupling_conserves_momentum_over_whole_steps() {
     assert!(pushed > 0.0, "the substeps must carry a coupling force");
 }
 
+/// With "flip" a band grain turns with the material where it is quasi-static and keeps its own
+/// spin where it flows (`coupling.quasi_static`, inertial number γ̇ √(d/g) < 1e-3). The
+/// resting pile with its band grains spun to 100 rad/s: after one step they turn with the
+/// material (under 1 rad/s). The same pile sheared at 50 s⁻¹ (I ≈ 0.5, grains and points
+/// v_x = γ̇ y): they keep 100 rad/s but for what their contacts do in one step (within
+/// 10 rad/s); with the threshold raised to 1e9 they take the material's spin, between −γ̇
+/// and 0 (−γ̇/2 in a full stencil; the band's nodes near the surface carry less than the
+/// whole gradient: −13 to −18 rad/s measured).
+#[test]
+fn band_grains_roll_only_where_the_material_flows() {
+    let shear = 50.0;
+    let spun = |quasi_static: f64, flowing: bool| -> Vec<f64> {
+        let mut h = Hybrid::load_with("tests/scenes/hybrid_pile_2d.toml", |s| s.coupling.quasi_static = quasi_static);
+        let g = &mut h.dem.state.grains;
+        for i in (0..g.len()).filter(|&i| !g.frozen[i]) {
+            g.omega[i] = 100.0;
+            if flowing {
+                g.v[i] = glam::DVec2::new(shear * g.x[i].y, 0.0);
+            }
+        }
+        if flowing {
+            let p = &mut h.mpm.points;
+            for k in 0..p.len() {
+                p.v[k] = glam::DVec2::new(shear * p.x[k].y, 0.0);
+            }
+        }
+        let x = h.exchange(1);
+        assert!(!x.velocities.is_empty());
+        h.finish(1, &x);
+        let g = &h.dem.state.grains;
+        (0..g.len()).filter(|&i| g.scale[i] < 1.0).map(|i| g.omega[i]).collect()
+    };
+    let at_rest = spun(1e-3, false);
+    assert!(!at_rest.is_empty());
+    assert!(at_rest.iter().all(|w| w.abs() < 1.0), "at rest: {at_rest:?}");
+    let rolling = spun(1e-3, true);
+    assert!(rolling.iter().all(|w| (w - 100.0).abs() < 10.0), "flowing: {rolling:?}");
+    let turned = spun(1e9, true);
+    assert!(turned.iter().all(|w| (-shear..0.0).contains(w)), "always turned: {turned:?}");
+}
+
 /// A hybrid block translating without gravity keeps its shape (issue 5): over 0.5 s every grain
 /// and every material point moves by v t to within 0.01 grain diameter, so the two halves of the
 /// band never drift apart. Run in this process with the real solvers and the coupler's solve.
