@@ -8,11 +8,14 @@
 //! - [`zone_of_distance`]: continuum, hybrid or discrete from that distance, `φ0` and `r_h`;
 //! - [`enrichment`]: where new grains go (Poisson-disk growth from the grains there) and their
 //!   velocity (Alg. 10);
-//! - [`homogenize`]: the grains' stress on the MPM grid (Alg. 11).
+//! - [`homogenize`]: the grains' stress on the MPM grid (Alg. 11);
+//! - [`epoch`]: one epoch of the oracle: new zones, and the grains and points to delete and
+//!   create (Alg. 8, 17, 18).
 
 use grains_grid::Grid;
 
 pub mod enrichment;
+pub mod epoch;
 pub mod homogenize;
 
 /// Where a cell lies relative to the reconciliation zone.
@@ -24,11 +27,11 @@ pub enum Zone {
 }
 
 /// Cells along each axis (1 beyond `dim`).
-fn dims(cells: &Grid, dim: usize) -> [usize; 3] {
+pub(crate) fn dims(cells: &Grid, dim: usize) -> [usize; 3] {
     [0, 1, 2].map(|k| if k < dim { cells.nodes[k] as usize } else { 1 })
 }
 
-fn linear(n: [usize; 3], ijk: [usize; 3]) -> usize {
+pub(crate) fn linear(n: [usize; 3], ijk: [usize; 3]) -> usize {
     (ijk[2] * n[1] + ijk[1]) * n[0] + ijk[0]
 }
 

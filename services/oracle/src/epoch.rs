@@ -1,0 +1,671 @@
+//! One oracle epoch (Yue 2018 Alg. 7–9): new zones from the grains' packing fraction, and
+//! what the solvers must delete and create so that every cell holds the models of its zone.
+//!
+//! Zones are per cell of the MPM grid. A discrete cell holds grains only, a continuum cell
+//! points only, a hybrid cell both (each solver weighs its share there: grains by 1 − w,
+//! points by w). After an epoch:
+//! - grains in continuum cells and points in discrete cells are deleted (Alg. 17, 18);
+//! - a hybrid cell with grains but no points gets new points (homogenization, §4.2): placed by
+//!   Poisson-disk sampling, their mass the grains' mass in the cell (so that w of it replaces
+//!   the w the grains give up), their velocity and stress the grains' rasterized to the grid
+//!   and interpolated (Alg. 11), the stress left for the MPM to turn into its strain;
+//! - a hybrid cell with points but no grains gets new grains (enrichment): grown from the
+//!   grains around by [`enrichment::fill`], velocity by [`enrichment::neighbour_velocity`].
+//!
+//! Two rules keep mass: no cell goes from continuum to discrete or back in one epoch (§4.2),
+//! and a cell whose new zone would delete the only model its material is in (points that
+//! flowed into a discrete cell, grains into a continuum one) is made hybrid instead, so that
+//! the missing model is created first and the other one deleted at a later epoch.
+
+use crate::{Zone, dims, distance_to_level, enrichment, linear, packing_fraction, zone_of_distance};
+use grains_dem::packing::Rng;
+use grains_grid::shape::for_each_node;
+use grains_grid::{Grid, Kernel, Space};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// A grain as the oracle sees it: full (unweighted) mass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grain {
+    pub id: u64,
+    pub x: [f64; 3],
+    pub radius: f64,
+    /// [kg], not weighted by the zone.
+    pub mass: f64,
+    pub v: [f64; 3],
+}
+
+/// A material point as the oracle sees it: full (unweighted) mass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point {
+    pub id: u64,
+    pub x: [f64; 3],
+    /// [kg], not weighted by the zone.
+    pub mass: f64,
+    pub v: [f64; 3],
+}
+
+/// A material point to create.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewPoint {
+    pub id: u64,
+    pub x: [f64; 3],
+    /// [kg], not weighted by the zone.
+    pub mass: f64,
+    /// [m³] (2D: m² per metre)
+    pub volume: f64,
+    pub v: [f64; 3],
+    /// Cauchy stress [Pa], tension positive.
+    pub stress: [[f64; 3]; 3],
+}
+
+/// A grain to create.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewGrain {
+    pub id: u64,
+    pub x: [f64; 3],
+    pub radius: f64,
+    pub v: [f64; 3],
+}
+
+/// The oracle's knobs (the scene's `[oracle]` and the materials').
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Packing fraction Φρ of the isocontour the distance is measured from.
+    pub critical_packing: f64,
+    /// φ0: distance from the isocontour, into the material, of the hybrid band's centre [m].
+    pub centre: f64,
+    /// r_h: half-width of the hybrid band [m].
+    pub half_width: f64,
+    /// Radii of new grains: N(mean, std²) clamped to ±2 std [m].
+    pub radius_mean: f64,
+    pub radius_std: f64,
+    /// Points per cell and axis of the MPM (new cells get up to this many per axis).
+    pub points_per_axis: u32,
+    /// Mass per volume of the continuum (grain density × packing) [kg/m³]: a new point's
+    /// volume is its mass over it.
+    pub bulk_density: f64,
+    /// Placement attempts per grain of the enrichment front.
+    pub attempts: usize,
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Plan {
+    /// The zone of every cell (cells of `dims`, x fastest).
+    pub zones: Vec<Zone>,
+    /// Signed distance of every cell centre to the isocontour, positive inside [m].
+    pub distance: Vec<f64>,
+    pub delete_grains: Vec<u64>,
+    pub delete_points: Vec<u64>,
+    pub new_grains: Vec<NewGrain>,
+    pub new_points: Vec<NewPoint>,
+}
+
+/// The cell (index into the zone arrays) of a position, if on the grid.
+pub fn cell_of(cells: &Grid, dim: usize, x: [f64; 3]) -> Option<usize> {
+    let n = dims(cells, dim);
+    let mut ijk = [0usize; 3];
+    for k in 0..dim {
+        let i = ((x[k] - cells.origin[k]) / cells.h).floor();
+        if i < 0.0 || i >= n[k] as f64 {
+            return None;
+        }
+        ijk[k] = i as usize;
+    }
+    Some(linear(n, ijk))
+}
+
+/// One epoch. `nodes` is the MPM grid (its kernel spreads the grains' momentum and stress);
+/// `cells` its cells (one node less per used axis); `previous` the zone of every cell;
+/// `stress` the grains' stress per node ([`crate::homogenize::stress`]). New ids count up
+/// from `next_grain_id` and `next_point_id`. Deterministic from `rng`.
+#[allow(clippy::too_many_arguments)]
+pub fn plan<S: Space>(
+    nodes: &Grid,
+    kernel: Kernel,
+    cells: &Grid,
+    previous: &[Zone],
+    grains: &[Grain],
+    points: &[Point],
+    stress: &BTreeMap<u64, [[f64; 3]; 3]>,
+    s: &Settings,
+    (next_grain_id, next_point_id): (u64, u64),
+    rng: &mut Rng,
+) -> Plan {
+    let dim = S::DIM;
+    let n = dims(cells, dim);
+    let count: usize = n.iter().product();
+    assert_eq!(previous.len(), count, "one previous zone per cell");
+    let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
+    for g in grains {
+        if let Some(c) = cell_of(cells, dim, g.x) {
+            grain_mass[c] += g.mass;
+        }
+    }
+    for p in points {
+        if let Some(c) = cell_of(cells, dim, p.x) {
+            point_mass[c] += p.mass;
+        }
+    }
+    // Alg. 7 on the grains; cells with material points are dense by the paper's ansatz.
+    let disks: Vec<([f64; 3], f64)> = grains.iter().map(|g| (g.x, g.radius)).collect();
+    let mut field = packing_fraction(cells, dim, &disks, 4);
+    for (f, &m) in field.iter_mut().zip(&point_mass) {
+        if m > 0.0 {
+            *f = 1.0;
+        }
+    }
+    let distance = distance_to_level(cells, dim, &field, s.critical_packing);
+    // A cell "lacks" a model when that model holds under half of what the other holds.
+    let lacks_grains = |c: usize| point_mass[c] > 0.0 && grain_mass[c] < 0.5 * point_mass[c];
+    let lacks_points = |c: usize| grain_mass[c] > 0.0 && point_mass[c] < 0.5 * grain_mass[c];
+    let zones: Vec<Zone> = (0..count)
+        .map(|c| match (previous[c], zone_of_distance(distance[c], s.centre, s.half_width)) {
+            (Zone::Continuum, Zone::Discrete) | (Zone::Discrete, Zone::Continuum) => Zone::Hybrid,
+            (_, Zone::Discrete) if lacks_grains(c) => Zone::Hybrid,
+            (_, Zone::Continuum) if lacks_points(c) => Zone::Hybrid,
+            (_, z) => z,
+        })
+        .collect();
+    let zone_at = |x: [f64; 3]| cell_of(cells, dim, x).map_or(Zone::Discrete, |c| zones[c]);
+    let delete_grains = grains.iter().filter(|g| zone_at(g.x) == Zone::Continuum).map(|g| g.id).collect();
+    let delete_points = points.iter().filter(|p| zone_at(p.x) == Zone::Discrete).map(|p| p.id).collect();
+
+    // Homogenization: the grains' velocity on the nodes (mass-weighted, the MPM's kernel).
+    let need_points: Vec<usize> = (0..count).filter(|&c| zones[c] == Zone::Hybrid && lacks_points(c)).collect();
+    let mut new_points = Vec::new();
+    if !need_points.is_empty() {
+        let mut node_mp: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
+        for g in grains {
+            for_each_node::<S>(nodes, kernel, S::from_array(g.x), |node, w, _| {
+                if w > 0.0 {
+                    let e = node_mp.entry(node).or_default();
+                    e.0 += w * g.mass;
+                    for k in 0..3 {
+                        e.1[k] += w * g.mass * g.v[k];
+                    }
+                }
+            });
+        }
+        let spacing = cells.h / s.points_per_axis.max(1) as f64;
+        let per_cell = (s.points_per_axis.max(1) as usize).pow(dim as u32);
+        for &c in &need_points {
+            let lo = cell_corner(cells, n, c);
+            let xs = poisson_in_cell(dim, lo, cells.h, per_cell, 0.75 * spacing, rng);
+            let mass = grain_mass[c] / xs.len() as f64;
+            for x in xs {
+                let (mut v, mut sigma, mut wv, mut ws) = ([0.0; 3], [[0.0; 3]; 3], 0.0, 0.0);
+                for_each_node::<S>(nodes, kernel, S::from_array(x), |node, w, _| {
+                    if let Some((m, p)) = node_mp.get(&node).filter(|(m, _)| *m > 0.0) {
+                        (0..3).for_each(|k| v[k] += w * p[k] / m);
+                        wv += w;
+                    }
+                    if let Some(st) = stress.get(&node) {
+                        for a in 0..3 {
+                            for b in 0..3 {
+                                sigma[a][b] += w * st[a][b];
+                            }
+                        }
+                        ws += w;
+                    }
+                });
+                // Renormalized over the nodes that have a value: a cell at the edge of the
+                // grains reads their values, not zeros from empty nodes.
+                let v = if wv > 0.0 { v.map(|c| c / wv) } else { v };
+                let stress = if ws > 0.0 { sigma.map(|row| row.map(|e| e / ws)) } else { sigma };
+                new_points.push(NewPoint {
+                    id: next_point_id + new_points.len() as u64,
+                    x,
+                    mass,
+                    volume: mass / s.bulk_density,
+                    v,
+                    stress,
+                });
+            }
+        }
+    }
+
+    // Enrichment: grow grains into the hybrid cells that have points only.
+    let need_grains: BTreeSet<usize> = (0..count).filter(|&c| zones[c] == Zone::Hybrid && lacks_grains(c)).collect();
+    let mut new_grains = Vec::new();
+    if !need_grains.is_empty() {
+        let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for &c in &need_grains {
+            let lo = cell_corner(cells, n, c);
+            for k in 0..3 {
+                min[k] = min[k].min(lo[k]);
+                max[k] = max[k].max(if k < dim { lo[k] + cells.h } else { lo[k] });
+            }
+        }
+        let inside = |x: [f64; 3]| cell_of(cells, dim, x).is_some_and(|c| need_grains.contains(&c));
+        let mut placed = enrichment::fill(dim, min, max, inside, &disks, s.radius_mean, s.radius_std, s.attempts, rng);
+        // The front grows from the grains at the region's edge; a cell that no grain reaches
+        // (points that flowed away from the grains) is filled on its own, from a random seed.
+        let mut reached: BTreeSet<usize> = placed.iter().filter_map(|(x, _)| cell_of(cells, dim, *x)).collect();
+        reached.extend(grains.iter().filter_map(|g| cell_of(cells, dim, g.x)));
+        for &c in need_grains.iter().filter(|c| !reached.contains(c)) {
+            let lo = cell_corner(cells, n, c);
+            let hi = [0, 1, 2].map(|k| if k < dim { lo[k] + cells.h } else { lo[k] });
+            let around: Vec<([f64; 3], f64)> = disks.iter().chain(&placed).copied().collect();
+            let more = enrichment::fill(
+                dim,
+                lo,
+                hi,
+                |x| cell_of(cells, dim, x) == Some(c),
+                &around,
+                s.radius_mean,
+                s.radius_std,
+                s.attempts,
+                rng,
+            );
+            placed.extend(more);
+        }
+        let sources: Vec<([f64; 3], [f64; 3])> = grains.iter().map(|g| (g.x, g.v)).chain(points.iter().map(|p| (p.x, p.v))).collect();
+        for (x, radius) in placed {
+            let v = enrichment::neighbour_velocity(x, s.radius_mean, sources.iter().copied()).unwrap_or([0.0; 3]);
+            new_grains.push(NewGrain {
+                id: next_grain_id + new_grains.len() as u64,
+                x,
+                radius,
+                v,
+            });
+        }
+    }
+    Plan {
+        zones,
+        distance,
+        delete_grains,
+        delete_points,
+        new_grains,
+        new_points,
+    }
+}
+
+fn cell_corner(cells: &Grid, n: [usize; 3], c: usize) -> [f64; 3] {
+    let ijk = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
+    [0, 1, 2].map(|k| cells.origin[k] + ijk[k] as f64 * cells.h)
+}
+
+/// Up to `target` points in the cell at `lo` of width `h`, no two closer than `gap` (dart
+/// throwing, 30 darts per point wanted); at least one (the centre) so the cell's mass goes
+/// somewhere.
+fn poisson_in_cell(dim: usize, lo: [f64; 3], h: f64, target: usize, gap: f64, rng: &mut Rng) -> Vec<[f64; 3]> {
+    let mut xs: Vec<[f64; 3]> = Vec::new();
+    for _ in 0..30 * target {
+        if xs.len() == target {
+            break;
+        }
+        let x = [0, 1, 2].map(|k| if k < dim { lo[k] + h * rng.uniform() } else { lo[k] });
+        if xs.iter().all(|y| (0..dim).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>() >= gap * gap) {
+            xs.push(x);
+        }
+    }
+    if xs.is_empty() {
+        xs.push([0, 1, 2].map(|k| if k < dim { lo[k] + 0.5 * h } else { lo[k] }));
+    }
+    xs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use grains_grid::D2;
+
+    const R: f64 = 0.5e-3;
+    const H: f64 = 0.002;
+    const W: f64 = 0.5;
+    const V0: [f64; 3] = [0.3, -0.1, 0.0];
+
+    /// The MPM grid over [0, 48] × [0, 32] mm and its cells.
+    fn grids() -> (Grid, Grid) {
+        let nodes = Grid::covering([0.0; 3], [0.048, 0.032, 0.0], H, 2);
+        let cells = Grid {
+            nodes: [nodes.nodes[0] - 1, nodes.nodes[1] - 1, 1],
+            ..nodes
+        };
+        (nodes, cells)
+    }
+
+    fn settings() -> Settings {
+        Settings {
+            critical_packing: 0.5,
+            centre: 0.006,
+            half_width: 0.002,
+            radius_mean: R,
+            radius_std: 0.04 * R,
+            points_per_axis: 2,
+            bulk_density: 2500.0 * 0.82,
+            attempts: 30,
+        }
+    }
+
+    fn disk_mass(r: f64) -> f64 {
+        2500.0 * std::f64::consts::PI * r * r
+    }
+
+    /// A hexagonal packing of disks (touching) over [x0, x1] × [y0, y1], all moving at V0.
+    fn lattice(x0: f64, x1: f64, y0: f64, y1: f64) -> Vec<Grain> {
+        let mut out = Vec::new();
+        let mut j = 0;
+        loop {
+            let y = y0 + R + j as f64 * 3f64.sqrt() * R;
+            if y + R > y1 {
+                return out;
+            }
+            let mut x = x0 + R + (j % 2) as f64 * R;
+            while x + R <= x1 {
+                out.push(Grain {
+                    id: out.len() as u64,
+                    x: [x, y, 0.0],
+                    radius: R,
+                    mass: disk_mass(R),
+                    v: V0,
+                });
+                x += 2.0 * R;
+            }
+            j += 1;
+        }
+    }
+
+    /// Σ mass and momentum as the solvers weigh them in `zones` (grains 1 − w, points w in
+    /// hybrid cells), new grains with the mass of their disk.
+    /// `strict`: every item must be in a zone that has its model (after an epoch).
+    fn totals(cells: &Grid, zones: &[Zone], grains: &[Grain], points: &[Point], strict: bool) -> (f64, [f64; 3]) {
+        let zone = |x| cell_of(cells, 2, x).map_or(Zone::Discrete, |c| zones[c]);
+        let (mut m, mut p) = (0.0, [0.0; 3]);
+        let items = grains
+            .iter()
+            .map(|g| (g.x, g.mass, g.v, 1.0 - W, Zone::Continuum))
+            .chain(points.iter().map(|q| (q.x, q.mass, q.v, W, Zone::Discrete)));
+        for (x, mass, v, hybrid_share, absent) in items {
+            let share = match zone(x) {
+                Zone::Hybrid => hybrid_share,
+                z if strict && z == absent => panic!("an item left in a zone without its model at {x:?}"),
+                _ => 1.0,
+            };
+            m += share * mass;
+            (0..3).for_each(|k| p[k] += share * mass * v[k]);
+        }
+        (m, p)
+    }
+
+    /// Applies a plan: deletes, creates (points at their mass, grains at their disk's).
+    fn apply(plan: &Plan, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
+        grains.retain(|g| !plan.delete_grains.contains(&g.id));
+        points.retain(|p| !plan.delete_points.contains(&p.id));
+        grains.extend(plan.new_grains.iter().map(|g| Grain {
+            id: g.id,
+            x: g.x,
+            radius: g.radius,
+            mass: disk_mass(g.radius),
+            v: g.v,
+        }));
+        points.extend(plan.new_points.iter().map(|p| Point {
+            id: p.id,
+            x: p.x,
+            mass: p.mass,
+            v: p.v,
+        }));
+    }
+
+    fn depth_of(cells: &Grid, c: usize, top: f64, right: f64) -> f64 {
+        let n = cells.nodes[0] as usize;
+        let (x, y) = ((((c % n) as f64) + 0.5) * H, (((c / n) as f64) + 0.5) * H);
+        (top - y).min(right - x)
+    }
+
+    /// An all-discrete block 40 × 20 mm (floor and left wall at the grid's edge, free top and
+    /// right face), moving uniformly. Epoch 1: the interior deeper than φ0 + r_h = 8 mm would
+    /// be continuum but may not jump from discrete, so it turns hybrid and gets points with
+    /// the grains' mass, velocity and (no contacts) zero stress; cells within φ0 − r_h of the
+    /// surface stay discrete. Epoch 2: the deep cells turn continuum and lose their grains.
+    /// Mass and momentum of both epochs conserved to round-off (each hybrid cell's points
+    /// carry exactly the mass of its grains).
+    #[test]
+    fn a_block_goes_discrete_to_hybrid_to_continuum_without_losing_mass() {
+        let (nodes, cells) = grids();
+        let s = settings();
+        let mut grains = lattice(0.0, 0.040, 0.0, 0.020);
+        let mut points = Vec::new();
+        let count = (cells.nodes[0] * cells.nodes[1]) as usize;
+        let before = totals(&cells, &vec![Zone::Discrete; count], &grains, &points, true);
+        let mut rng = Rng::new(7);
+        let ids = (grains.len() as u64, 0);
+        let one = plan::<D2>(
+            &nodes,
+            Kernel::Gimp { half_width: 0.25 * H },
+            &cells,
+            &vec![Zone::Discrete; count],
+            &grains,
+            &points,
+            &BTreeMap::new(),
+            &s,
+            ids,
+            &mut rng,
+        );
+        // The isocontour of a packed block lies about on its faces (x = 40 mm, y = 20 mm).
+        let (top, right) = (0.020, 0.040);
+        for c in 0..count {
+            let d = depth_of(&cells, c, top, right);
+            let inside = (cells_row(&cells, c) as f64 + 0.5) * H < top && (cells_col(&cells, c) as f64 + 0.5) * H < right;
+            if inside && d > 0.0 && d < s.centre - s.half_width - H {
+                assert_eq!(one.zones[c], Zone::Discrete, "cell {c} at depth {d}");
+            }
+            if inside && d > s.centre - s.half_width + H {
+                assert_eq!(one.zones[c], Zone::Hybrid, "cell {c} at depth {d}: hybrid (no jump to continuum)");
+            }
+            // Within 3/4 cell of the depth, away from the corner (its cell is under half full,
+            // so the isocontour cuts the corner off).
+            let (to_top, to_right) = (
+                top - (cells_row(&cells, c) as f64 + 0.5) * H,
+                right - (cells_col(&cells, c) as f64 + 0.5) * H,
+            );
+            if inside && (to_top - to_right).abs() > 2.0 * H {
+                assert!(
+                    (one.distance[c] - d).abs() < 0.75 * H,
+                    "cell {c}: distance {} vs depth {d}",
+                    one.distance[c]
+                );
+            }
+        }
+        assert!(one.zones.iter().all(|z| *z != Zone::Continuum));
+        assert!(one.delete_grains.is_empty() && one.delete_points.is_empty());
+        assert!(!one.new_points.is_empty() && one.new_grains.is_empty());
+        for p in &one.new_points {
+            assert_eq!(one.zones[cell_of(&cells, 2, p.x).unwrap()], Zone::Hybrid);
+            assert!(p.v.iter().zip(V0).all(|(a, b)| (a - b).abs() < 1e-12), "{:?}", p.v);
+            assert_eq!(p.stress, [[0.0; 3]; 3]);
+        }
+        apply(&one, &mut grains, &mut points);
+        let after = totals(&cells, &one.zones, &grains, &points, true);
+        assert!((after.0 - before.0).abs() < 1e-12 * before.0, "mass {} -> {}", before.0, after.0);
+        assert!(
+            (0..3).all(|k| (after.1[k] - before.1[k]).abs() < 1e-12 * before.0),
+            "momentum {:?} -> {:?}",
+            before.1,
+            after.1
+        );
+
+        let two = plan::<D2>(
+            &nodes,
+            Kernel::Gimp { half_width: 0.25 * H },
+            &cells,
+            &one.zones,
+            &grains,
+            &points,
+            &BTreeMap::new(),
+            &s,
+            (1 << 20, 1 << 20),
+            &mut rng,
+        );
+        let deep: Vec<usize> = (0..count)
+            .filter(|&c| depth_of(&cells, c, top, right) > s.centre + s.half_width + H)
+            .collect();
+        assert!(!deep.is_empty());
+        for &c in &deep {
+            assert_eq!(two.zones[c], Zone::Continuum, "cell {c}");
+        }
+        assert!(!two.delete_grains.is_empty() && two.new_points.is_empty() && two.new_grains.is_empty());
+        apply(&two, &mut grains, &mut points);
+        let last = totals(&cells, &two.zones, &grains, &points, true);
+        assert!((last.0 - before.0).abs() < 1e-12 * before.0, "mass {} -> {}", before.0, last.0);
+        assert!((0..3).all(|k| (last.1[k] - before.1[k]).abs() < 1e-12 * before.0));
+    }
+
+    fn cells_col(cells: &Grid, c: usize) -> usize {
+        c % cells.nodes[0] as usize
+    }
+
+    fn cells_row(cells: &Grid, c: usize) -> usize {
+        c / cells.nodes[0] as usize
+    }
+
+    /// Material points (4 per cell) fill y < 14 mm, grains 14..20 mm, over 40 mm; the zones
+    /// say continuum below 14 mm and discrete above. With φ0 = 10 mm the band moves down to
+    /// 8..12 mm below the top (y 8..12 mm): those continuum cells turn hybrid and get grains
+    /// grown from the grains above, none overlapping another, moving as their neighbours;
+    /// the former discrete cells at 12..14 mm below... (y 14..16 mm, depth 4..6 mm) stay
+    /// discrete. The total mass changes only by (1 − w) times the new grains' packing
+    /// mismatch (under 1%). A point left in a discrete cell with no grains (it flowed there)
+    /// makes its cell hybrid and gets grains, rather than being deleted.
+    #[test]
+    fn a_deeper_band_enriches_the_continuum_without_overlaps() {
+        let (nodes, cells) = grids();
+        let mut s = settings();
+        s.centre = 0.010;
+        let count = (cells.nodes[0] * cells.nodes[1]) as usize;
+        let mut grains = lattice(0.0, 0.040, 0.014, 0.020);
+        let spacing = H / 2.0;
+        let mut points = Vec::new();
+        for j in 0..14 {
+            for i in 0..40 {
+                points.push(Point {
+                    id: points.len() as u64,
+                    x: [(i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing, 0.0],
+                    mass: s.bulk_density * spacing * spacing,
+                    v: V0,
+                });
+            }
+        }
+        // The stray point: above the grains, at x = 45 mm (no grains there).
+        points.push(Point {
+            id: 10_000,
+            x: [0.045, 0.019, 0.0],
+            mass: s.bulk_density * spacing * spacing,
+            v: V0,
+        });
+        let previous: Vec<Zone> = (0..count)
+            .map(|c| {
+                if cells_row(&cells, c) < 7 && cells_col(&cells, c) < 20 {
+                    Zone::Continuum
+                } else {
+                    Zone::Discrete
+                }
+            })
+            .collect();
+        let before = totals(&cells, &previous, &grains, &points, false);
+        let mut rng = Rng::new(3);
+        let plan = plan::<D2>(
+            &nodes,
+            Kernel::Gimp { half_width: 0.25 * H },
+            &cells,
+            &previous,
+            &grains,
+            &points,
+            &BTreeMap::new(),
+            &s,
+            (5_000, 20_000),
+            &mut rng,
+        );
+        let stray = cell_of(&cells, 2, [0.045, 0.019, 0.0]).unwrap();
+        assert_eq!(plan.zones[stray], Zone::Hybrid, "the stray point's cell");
+        assert!(!plan.delete_points.contains(&10_000));
+        assert!(plan.new_grains.iter().any(|g| cell_of(&cells, 2, g.x) == Some(stray)));
+        // Away from the right face (x = 40 mm), whose band reaches x = 40 - 12 mm.
+        for c in (0..count).filter(|&c| cells_col(&cells, c) < 12) {
+            let y = (cells_row(&cells, c) as f64 + 0.5) * H;
+            let want = match y {
+                y if y > 0.0085 && y < 0.0115 => Some(Zone::Hybrid),
+                y if y < 0.0065 => Some(Zone::Continuum),
+                y if y > 0.0145 && y < 0.0175 => Some(Zone::Discrete),
+                _ => None,
+            };
+            if let Some(z) = want {
+                assert_eq!(plan.zones[c], z, "cell {c} at y {y}");
+            }
+        }
+        assert!(plan.delete_grains.is_empty());
+        let enriched: BTreeSet<usize> = plan.new_grains.iter().map(|g| cell_of(&cells, 2, g.x).unwrap()).collect();
+        for c in (0..count).filter(|&c| cells_col(&cells, c) < 20 && plan.zones[c] == Zone::Hybrid && previous[c] == Zone::Continuum) {
+            assert!(enriched.contains(&c), "hybrid cell {c} got no grains");
+        }
+        let all: Vec<([f64; 3], f64)> = grains
+            .iter()
+            .map(|g| (g.x, g.radius))
+            .chain(plan.new_grains.iter().map(|g| (g.x, g.radius)))
+            .collect();
+        for (i, a) in all.iter().enumerate() {
+            for b in &all[i + 1..] {
+                let d = ((a.0[0] - b.0[0]).powi(2) + (a.0[1] - b.0[1]).powi(2)).sqrt();
+                assert!(
+                    a.1 + b.1 - d <= 0.05 * a.1.min(b.1),
+                    "overlap {} of radii {} {}",
+                    a.1 + b.1 - d,
+                    a.1,
+                    b.1
+                );
+            }
+        }
+        for g in &plan.new_grains {
+            assert!(g.v.iter().zip(V0).all(|(a, b)| (a - b).abs() < 1e-12), "{:?}", g.v);
+        }
+        apply(&plan, &mut grains, &mut points);
+        let after = totals(&cells, &plan.zones, &grains, &points, true);
+        let change = (after.0 - before.0).abs() / before.0;
+        eprintln!(
+            "enrichment: {} new grains, mass change {:.3}%",
+            plan.new_grains.len(),
+            100.0 * change
+        );
+        assert!(change < 0.01, "mass {} -> {} ({:.2}%)", before.0, after.0, 100.0 * change);
+        let p = (0..3).map(|k| (after.1[k] - before.1[k]).powi(2)).sum::<f64>().sqrt();
+        let p0 = (0..3).map(|k| before.1[k].powi(2)).sum::<f64>().sqrt();
+        assert!(p < 0.01 * p0, "momentum {:?} -> {:?}", before.1, after.1);
+    }
+
+    /// No cell jumps from continuum to discrete (§4.2): a block whose cells all hold grains and
+    /// points, marked continuum, has its surface cells (distance under φ0 − r_h) made hybrid,
+    /// not discrete, and keeps its points there.
+    #[test]
+    fn no_cell_jumps_from_continuum_to_discrete() {
+        let (nodes, cells) = grids();
+        let s = settings();
+        let count = (cells.nodes[0] * cells.nodes[1]) as usize;
+        let grains = lattice(0.0, 0.040, 0.0, 0.020);
+        let points: Vec<Point> = (0..20 * 10)
+            .map(|i| Point {
+                id: i as u64,
+                x: [((i % 20) as f64 + 0.5) * H, ((i / 20) as f64 + 0.5) * H, 0.0],
+                mass: 1e-3,
+                v: V0,
+            })
+            .collect();
+        let previous = vec![Zone::Continuum; count];
+        let plan = plan::<D2>(
+            &nodes,
+            Kernel::Bspline2,
+            &cells,
+            &previous,
+            &grains,
+            &points,
+            &BTreeMap::new(),
+            &s,
+            (0, 0),
+            &mut Rng::new(1),
+        );
+        let top = cell_of(&cells, 2, [0.011, 0.019, 0.0]).unwrap();
+        assert!(plan.distance[top] < s.centre - s.half_width, "{}", plan.distance[top]);
+        assert_eq!(plan.zones[top], Zone::Hybrid);
+        assert!(plan.zones.iter().all(|z| *z != Zone::Discrete));
+        assert!(plan.delete_points.is_empty());
+    }
+}
