@@ -188,6 +188,33 @@ pub fn kirchhoff<M: Matrix>(m: &HenckyCriticalState, b_e: &M) -> M {
     M::from_eigen(principal_stress(m, &e, M::DIM), &q)
 }
 
+/// The elastic strain b^e whose Cauchy stress σ = τ / J is `sigma` (for new points made
+/// from grains, Yue 2018 §4.2 with this model's elasticity): in the principal frame of σ,
+/// τᵢ = J σᵢ with J = e^θ, θ = tr ε, so the trace of eq. 4 reads d K θ = e^θ tr σ (solved
+/// by Newton from θ = tr σ / (d K); one root in compression, the small one under a small
+/// tension); then εᵢ = J dev σᵢ / (2G) + θ / d and b^e = exp(2ε).
+pub fn strain_of_stress<M: Matrix>(m: &HenckyCriticalState, sigma: &M) -> M {
+    let d = M::DIM as f64;
+    let (s, q) = sigma.sym_eigen();
+    let tr: f64 = s[..M::DIM].iter().sum();
+    let mut theta = tr / (d * m.bulk);
+    for _ in 0..50 {
+        let f = d * m.bulk * theta - theta.exp() * tr;
+        let slope = d * m.bulk - theta.exp() * tr;
+        let step = f / slope;
+        theta -= step;
+        if step.abs() <= 1e-15 * theta.abs().max(1e-12) {
+            break;
+        }
+    }
+    let j = theta.exp();
+    let mut b = [0.0; 3];
+    for i in 0..M::DIM {
+        b[i] = (2.0 * (j * (s[i] - tr / d) / (2.0 * m.shear) + theta / d)).exp();
+    }
+    M::from_eigen(b, &q)
+}
+
 /// Yield function f = √J₂ + η p − ζ c (eq. 5) at a packing fraction; admissible when f ≤ 0.
 pub fn yield_function<M: Matrix>(m: &HenckyCriticalState, tau: &M, packing: f64) -> f64 {
     let cone = m.cone(packing, M::DIM);
@@ -282,6 +309,24 @@ mod tests {
     }
     fn b3(r: &DMat3, e: [f64; 3]) -> DMat3 {
         *r * DMat3::from_diagonal(DVec3::from_array(e.map(|x| (2.0 * x).exp()))) * r.transpose()
+    }
+
+    /// b^e → σ = τ(b^e) / J → b^e again (rotated, compressed, sheared; 2D and 3D).
+    #[test]
+    fn strain_of_stress_inverts_the_stress() {
+        let m = table2();
+        let mut rng = Rng(13);
+        for _ in 0..50 {
+            let e = [-2e-3 * rng.next(), -1e-3 * rng.next() + 2e-4, -3e-3 * rng.next()];
+            let b = b2(&rot2(&mut rng), e);
+            let sigma = kirchhoff(&m, &b) * (1.0 / b.det().sqrt());
+            let back = strain_of_stress(&m, &sigma);
+            assert!((back - b).norm() < 1e-12, "2D {back:?} vs {b:?}");
+            let b = b3(&rot3(&mut rng), e);
+            let sigma = kirchhoff(&m, &b) * (1.0 / b.det().sqrt());
+            let back = strain_of_stress(&m, &sigma);
+            assert!((back - b).norm() < 1e-12, "3D {back:?} vs {b:?}");
+        }
     }
     fn isotropic<M: Matrix>(e: f64) -> M {
         M::from_eigen([(2.0 * e).exp(); 3], &M::identity())

@@ -94,6 +94,24 @@ pub fn return_map<M: Matrix>(m: &DruckerPragerYue, b_star: &M) -> M {
     M::identity() * lambda1 + dev * lambda2
 }
 
+/// The elastic strain b^e whose Cauchy stress σ = τ / J^e is `sigma` (Yue 2018 §4.2, for
+/// new points made from grains): the trace of eq. 10, J tr σ = d κ/2 (J² − 1), gives J (its
+/// positive root); its deviator gives dev b̄ = J dev σ / μ; b̄ = dev b̄ + t I with det b̄ = 1
+/// gives t (2D: t² + det dev b̄ = 1; 3D: the cubic t³ − ½‖dev b̄‖² t + det dev b̄ − 1 = 0);
+/// b^e = J^(2/d) b̄.
+pub fn strain_of_stress<M: Matrix>(m: &DruckerPragerYue, sigma: &M) -> M {
+    let d = M::DIM as f64;
+    let tr = sigma.trace();
+    let j = (tr + (tr * tr + d * d * m.bulk * m.bulk).sqrt()) / (d * m.bulk);
+    let dev = sigma.dev() * (j / m.shear);
+    let t = if M::DIM == 2 {
+        (1.0 - dev.det()).sqrt()
+    } else {
+        cardano_largest_root(-0.5 * dev.norm().powi(2), dev.det() - 1.0)
+    };
+    (M::identity() * t + dev) * j.powf(2.0 / d)
+}
+
 /// The largest real root of the depressed cubic x³ + p x + q = 0 (Cardano; trigonometric
 /// form when there are three real roots), polished by one Newton step against the
 /// cancellation of the closed form.
@@ -134,6 +152,24 @@ mod tests {
         let (a, b, c) = (0.90 + 0.005 * (k % 4) as f64, 0.985, 1.03 - 0.003 * (k % 3) as f64);
         let (d, e, f) = (0.04 * t.cos(), 0.03 * t.sin(), 0.02);
         DMat3::from_cols(DVec3::new(a, d, e), DVec3::new(d, b, f), DVec3::new(e, f, c))
+    }
+
+    /// b^e → σ = τ(b^e) / J → b^e again, for compressed and sheared strains in 2D and 3D.
+    #[test]
+    fn strain_of_stress_inverts_the_stress() {
+        for k in 0..50 {
+            let (m2, m3) = (material(2), material(3));
+            let b = strained2(k);
+            let sigma = kirchhoff(&m2, &b) * (1.0 / b.det().sqrt());
+            let back = strain_of_stress(&m2, &sigma);
+            assert!((back - b).norm() < 1e-12, "2D {k}: {back:?} vs {b:?}");
+            let b = strained3(k);
+            let sigma = kirchhoff(&m3, &b) * (1.0 / b.det().sqrt());
+            let back = strain_of_stress(&m3, &sigma);
+            assert!((back - b).norm() < 1e-12, "3D {k}: {back:?} vs {b:?}");
+        }
+        // Stress-free: no strain.
+        assert!((strain_of_stress(&material(3), &DMat3::ZERO) - DMat3::IDENTITY).norm() < 1e-15);
     }
 
     #[test]
