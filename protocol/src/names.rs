@@ -108,7 +108,8 @@ pub const VELOCITIES: ServiceSpec = ServiceSpec {
     buffer: 2,
     overflow: false,
 };
-/// Oracle → solvers: zone of every grid cell that changed.
+/// Oracle → solvers: the zone of every grid cell that is not discrete (at start and at
+/// every epoch).
 pub const ZONES: ServiceSpec = ServiceSpec {
     name: "grains/oracle/zones",
     max_publishers: 1,
@@ -148,6 +149,38 @@ pub const DELETE_POINTS: ServiceSpec = ServiceSpec {
     buffer: 2,
     overflow: false,
 };
+/// Oracle → MPM: material points whose mass and volume change by a factor.
+pub const SCALE_POINTS: ServiceSpec = ServiceSpec {
+    name: "grains/oracle/scale_points",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
+/// DEM → oracle: every grain, at an oracle epoch (after the step).
+pub const DEM_EPOCH: ServiceSpec = ServiceSpec {
+    name: "grains/dem/epoch",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
+/// DEM → oracle: the grains' homogenized stress per grid node, at an oracle epoch.
+pub const DEM_STRESS: ServiceSpec = ServiceSpec {
+    name: "grains/dem/stress",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
+/// MPM → oracle: every material point, at an oracle epoch.
+pub const MPM_EPOCH: ServiceSpec = ServiceSpec {
+    name: "grains/mpm/epoch",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
 
 /// A service and its quality of service. Every participant opens a service with exactly
 /// these limits (iceoryx2 refuses an opener whose limits exceed the creator's).
@@ -164,7 +197,7 @@ pub struct ServiceSpec {
 }
 
 /// Every service of a run, for the spec and for cleanup.
-pub const ALL: [ServiceSpec; 17] = [
+pub const ALL: [ServiceSpec; 21] = [
     HELLO,
     WELCOME,
     CONTROL,
@@ -182,6 +215,10 @@ pub const ALL: [ServiceSpec; 17] = [
     SPAWN_POINTS,
     DELETE_GRAINS,
     DELETE_POINTS,
+    SCALE_POINTS,
+    DEM_EPOCH,
+    DEM_STRESS,
+    MPM_EPOCH,
 ];
 
 /// Node name of a participant in the iceoryx2 node list (`grains-dem`, …): what a survivor

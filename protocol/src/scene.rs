@@ -279,6 +279,14 @@ pub struct Oracle {
     pub kind: OracleKind,
     /// Macro-steps between oracle epochs.
     pub every: u64,
+    /// `surface`: the packing fraction Φρ of the isocontour the zones are measured from.
+    pub critical_packing: f64,
+    /// `surface`: φ0, the distance inside the isocontour of the hybrid band's centre [m]
+    /// (default `coupling.discrete_layer + hybrid_band / 2`, where the layered zones put it;
+    /// very large: all discrete; very negative: all continuum).
+    pub centre: Option<f64>,
+    /// `surface`: r_h, the band's half-width [m] (default `coupling.hybrid_band / 2`).
+    pub half_width: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -385,6 +393,15 @@ impl Scene {
     /// Number of components that matter in vectors (2 or 3).
     pub fn dim(&self) -> usize {
         self.dimension as usize
+    }
+
+    /// Whether the adaptive oracle holds an epoch after macro-step `step` (every
+    /// `oracle.every` steps of a run with a surface oracle and an oracle participant).
+    pub fn epoch_after(&self, step: u64) -> bool {
+        self.oracle
+            .as_ref()
+            .is_some_and(|o| o.kind == OracleKind::Surface && step.is_multiple_of(o.every))
+            && self.participants().contains(&Role::Oracle)
     }
 }
 
@@ -1172,6 +1189,18 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 Some(e) if *e.get_ref() >= 1 => *e.get_ref(),
                 Some(e) => return Err(ctx.err(Some(e.span()), Some("oracle.every"), "must be >= 1, got 0".into())),
             },
+            critical_packing: match &o.critical_packing {
+                None => 0.5,
+                Some(c) => in_range(ctx, c, "oracle.critical_packing", Open(0.0), Open(1.0))?,
+            },
+            centre: match &o.centre {
+                None => None,
+                Some(c) => Some(in_range(ctx, c, "oracle.centre", Bound::None, Bound::None)?),
+            },
+            half_width: match &o.half_width {
+                None => None,
+                Some(c) => Some(in_range(ctx, c, "oracle.half_width", Closed(0.0), Bound::None)?),
+            },
         }),
     };
     let output = Output {
@@ -1525,6 +1554,9 @@ pub mod raw {
     pub struct RawOracle {
         pub kind: Spanned<String>,
         pub every: Option<Spanned<u64>>,
+        pub critical_packing: Option<Spanned<f64>>,
+        pub centre: Option<Spanned<f64>>,
+        pub half_width: Option<Spanned<f64>>,
     }
 
     #[derive(Deserialize)]

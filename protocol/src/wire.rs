@@ -198,6 +198,50 @@ wire_type! {
 }
 
 wire_type! {
+    /// A grain (DEM → oracle) or a material point (MPM → oracle) at an oracle epoch. 88 bytes.
+    "grains.EpochItem.v1",
+    pub struct EpochItem {
+        pub id: u64,
+        /// Grain radius [m]; 0 for a material point.
+        pub radius: f64,
+        /// Full (unweighted) mass [kg] (2D: per metre).
+        pub mass: f64,
+        /// The share of the mass the solver counts: 1, or 1 − w (grains) / w (points) in a
+        /// hybrid cell.
+        pub share: f64,
+        /// Bit 0 ([`EPOCH_FIXED`]): a frozen grain, part of the scene's fixed boundary (never
+        /// deleted or weighed; new grains must not overlap it).
+        pub flags: u64,
+        pub position: [f64; 3],
+        pub velocity: [f64; 3],
+    }
+}
+
+wire_type! {
+    /// A material point whose mass and volume the MPM multiplies by `factor` (oracle → MPM,
+    /// at an epoch: the cell's mass stays what it was). 16 bytes.
+    "grains.PointScale.v1",
+    pub struct PointScale {
+        pub id: u64,
+        pub factor: f64,
+    }
+}
+
+/// [`EpochItem::flags`]: a frozen grain.
+pub const EPOCH_FIXED: u64 = 1;
+
+wire_type! {
+    /// The grains' homogenized stress on one grid node (DEM → oracle, Yue 2018 Alg. 11).
+    /// 56 bytes.
+    "grains.NodeStress.v1",
+    pub struct NodeStress {
+        pub node: u64,
+        /// Cauchy stress [Pa], tension positive, Voigt order xx, yy, zz, yz, xz, xy.
+        pub stress: [f64; 6],
+    }
+}
+
+wire_type! {
     /// One participant's account of one macro-step (every participant → launcher). 104 bytes.
     "grains.Summary.v1",
     pub struct Summary {

@@ -2,6 +2,7 @@
 //! Build the binaries first (the README's test command does): `cargo build --release --workspace --bins`.
 
 mod bridge;
+mod oracle;
 
 use grains_system_tests::*;
 use std::time::{Duration, Instant};
@@ -476,6 +477,36 @@ impl Hybrid {
         let x = self.exchange(step);
         self.finish(step, &x);
         x.velocities.len()
+    }
+
+    /// An oracle epoch after `step`, as the participants run it: the solvers' items and
+    /// stress to `oracle`, its decisions back to both solvers.
+    fn epoch(&mut self, oracle: &mut grains_oracle_service::OracleState, step: u64) -> grains_oracle_service::EpochMessages {
+        use grains_service::solver::{EpochChanges, Solver, StepWindow};
+        let (mut grains, mut stress, mut points) = (Vec::new(), Vec::new(), Vec::new());
+        self.dem.epoch_items(&mut grains);
+        self.dem.epoch_stress(&mut stress);
+        self.mpm.epoch_items(&mut points);
+        let w = StepWindow::of(&self.scene, step);
+        let m = oracle.epoch(&self.scene, w.time + w.dt, &grains, &stress, &points);
+        let zones = grains_service::zones::ZoneField::from_cells(&self.scene, &m.zones).unwrap();
+        let dem = EpochChanges {
+            zones: &zones,
+            delete: &m.delete_grains,
+            spawn_grains: &m.spawn_grains,
+            spawn_points: &[],
+            scale_points: &[],
+        };
+        self.dem.apply_epoch(step, &dem).unwrap();
+        let mpm = EpochChanges {
+            zones: &zones,
+            delete: &m.delete_points,
+            spawn_grains: &[],
+            spawn_points: &m.spawn_points,
+            scale_points: &m.scale_points,
+        };
+        self.mpm.apply_epoch(step, &mpm).unwrap();
+        m
     }
 
     fn kinetic_energy(&self) -> f64 {

@@ -36,6 +36,9 @@ unsafe impl Pod for NodeVelocity {}
 unsafe impl Pod for ZoneCell {}
 unsafe impl Pod for SpawnGrain {}
 unsafe impl Pod for SpawnPoint {}
+unsafe impl Pod for EpochItem {}
+unsafe impl Pod for NodeStress {}
+unsafe impl Pod for PointScale {}
 unsafe impl Pod for Summary {}
 unsafe impl Pod for Control {}
 unsafe impl Pod for Ack {}

@@ -18,3 +18,10 @@ pub fn scene_grid(scene: &Scene) -> (Grid, Kernel) {
     };
     (grid, kernel)
 }
+
+/// The domain's largest extent [m] (what gravity or a wall can move material across).
+pub fn scene_extent(scene: &Scene) -> f64 {
+    (0..scene.dim())
+        .map(|k| scene.domain.max[k] - scene.domain.min[k])
+        .fold(0.0, f64::max)
+}

@@ -8,7 +8,8 @@ use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{
-    Ack, AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
+    Ack, AckStatus, Command, Control, EpochItem, NodeStress, NodeVelocity, Param, PointScale, RasterNode, STEP_STOP, SpawnGrain,
+    SpawnPoint, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
 };
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -70,11 +71,163 @@ pub trait Solver {
         let _ = (max, out);
         0
     }
+    /// At an oracle epoch: every grain or point, as the oracle sees it.
+    fn epoch_items(&mut self, out: &mut Vec<EpochItem>) {
+        let _ = out;
+    }
+    /// At an oracle epoch (DEM): the grains' homogenized stress per grid node.
+    fn epoch_stress(&mut self, out: &mut Vec<NodeStress>) {
+        let _ = out;
+    }
+    /// The oracle's decisions of an epoch after step `step`: delete, create, then weigh
+    /// every item by the zone of its cell.
+    fn apply_epoch(&mut self, step: u64, changes: &EpochChanges<'_>) -> anyhow::Result<()> {
+        let _ = (step, changes);
+        bail!("this solver does not take oracle epochs")
+    }
     /// A `snapshot` or `set` command, between steps (after step `done`); why not, if it
     /// cannot be carried out.
     fn command(&mut self, done: u64, c: &Control) -> Result<(), String> {
         let _ = (done, c);
         Err("this solver takes no commands".into())
+    }
+}
+
+/// What an oracle epoch asks of a solver (its own lists only: the DEM gets no points).
+pub struct EpochChanges<'a> {
+    pub zones: &'a ZoneField,
+    /// Ids of this solver's items to delete.
+    pub delete: &'a [u64],
+    pub spawn_grains: &'a [SpawnGrain],
+    pub spawn_points: &'a [SpawnPoint],
+    /// Points whose mass and volume change (before the new ones are added).
+    pub scale_points: &'a [PointScale],
+}
+
+/// A solver's ports for oracle epochs.
+struct EpochPorts<T: Transport> {
+    items: T::Publisher<EpochItem, StepHeader>,
+    stress: Option<T::Publisher<NodeStress, StepHeader>>,
+    delete: T::Subscriber<u64, StepHeader>,
+    spawn_grains: Option<T::Subscriber<SpawnGrain, StepHeader>>,
+    spawn_points: Option<T::Subscriber<SpawnPoint, StepHeader>>,
+    scale_points: Option<T::Subscriber<PointScale, StepHeader>>,
+    items_buf: Vec<EpochItem>,
+    stress_buf: Vec<NodeStress>,
+}
+
+impl<T: Transport> EpochPorts<T> {
+    fn open(session: &Session<'_, T>) -> anyhow::Result<Self> {
+        let dem = session.role == Role::Dem;
+        Ok(EpochPorts {
+            items: session.publisher(if dem { &names::DEM_EPOCH } else { &names::MPM_EPOCH }, 1024)?,
+            stress: if dem {
+                Some(session.publisher(&names::DEM_STRESS, 1024)?)
+            } else {
+                None
+            },
+            delete: session.subscriber(if dem { &names::DELETE_GRAINS } else { &names::DELETE_POINTS })?,
+            spawn_grains: if dem {
+                Some(session.subscriber(&names::SPAWN_GRAINS)?)
+            } else {
+                None
+            },
+            spawn_points: if dem {
+                None
+            } else {
+                Some(session.subscriber(&names::SPAWN_POINTS)?)
+            },
+            scale_points: if dem {
+                None
+            } else {
+                Some(session.subscriber(&names::SCALE_POINTS)?)
+            },
+            items_buf: Vec::new(),
+            stress_buf: Vec::new(),
+        })
+    }
+
+    fn connected(&mut self) -> bool {
+        self.items.subscriber_count() >= 1
+            && self.stress.as_mut().is_none_or(|p| p.subscriber_count() >= 1)
+            && self.delete.publisher_count() >= 1
+            && self.spawn_grains.as_mut().is_none_or(|s| s.publisher_count() >= 1)
+            && self.spawn_points.as_mut().is_none_or(|s| s.publisher_count() >= 1)
+            && self.scale_points.as_mut().is_none_or(|s| s.publisher_count() >= 1)
+    }
+
+    /// Sends the solver's items (and stress) of step `window.step` to the oracle, waits for
+    /// its decisions and applies them.
+    fn exchange<S: Solver>(
+        &mut self,
+        session: &Session<'_, T>,
+        scene: &Scene,
+        zones_sub: &mut T::Subscriber<ZoneCell, StepHeader>,
+        window: &StepWindow,
+        solver: &mut S,
+    ) -> anyhow::Result<()> {
+        let header = session.header(window.step, window.time, window.dt);
+        self.items_buf.clear();
+        solver.epoch_items(&mut self.items_buf);
+        let items = &self.items_buf;
+        self.items.publish(items.len(), |h, out| {
+            *h = header;
+            out.copy_from_slice(items);
+        })?;
+        if let Some(p) = &mut self.stress {
+            self.stress_buf.clear();
+            solver.epoch_stress(&mut self.stress_buf);
+            let stress = &self.stress_buf;
+            p.publish(stress.len(), |h, out| {
+                *h = header;
+                out.copy_from_slice(stress);
+            })?;
+        }
+        let step = window.step;
+        let zones = session.recv(zones_sub, "the oracle's zones", |h, cells| -> anyhow::Result<ZoneField> {
+            session.check_message(&names::ZONES, h, step, cells)?;
+            ZoneField::from_cells(scene, cells).map_err(|e| anyhow::anyhow!("{}: {e}", names::ZONES.name))
+        })??;
+        let delete_spec = if session.role == Role::Dem {
+            names::DELETE_GRAINS
+        } else {
+            names::DELETE_POINTS
+        };
+        let delete = session.recv(&mut self.delete, "the oracle's delete list", |h, ids| -> anyhow::Result<Vec<u64>> {
+            session.check_message(&delete_spec, h, step, ids)?;
+            Ok(ids.to_vec())
+        })??;
+        let spawn_grains = match &mut self.spawn_grains {
+            Some(sub) => session.recv(sub, "the oracle's new grains", |h, g| -> anyhow::Result<Vec<SpawnGrain>> {
+                session.check_message(&names::SPAWN_GRAINS, h, step, g)?;
+                Ok(g.to_vec())
+            })??,
+            None => Vec::new(),
+        };
+        let spawn_points = match &mut self.spawn_points {
+            Some(sub) => session.recv(sub, "the oracle's new points", |h, p| -> anyhow::Result<Vec<SpawnPoint>> {
+                session.check_message(&names::SPAWN_POINTS, h, step, p)?;
+                Ok(p.to_vec())
+            })??,
+            None => Vec::new(),
+        };
+        let scale_points = match &mut self.scale_points {
+            Some(sub) => session.recv(sub, "the oracle's point scales", |h, p| -> anyhow::Result<Vec<PointScale>> {
+                session.check_message(&names::SCALE_POINTS, h, step, p)?;
+                Ok(p.to_vec())
+            })??,
+            None => Vec::new(),
+        };
+        solver.apply_epoch(
+            step,
+            &EpochChanges {
+                zones: &zones,
+                delete: &delete,
+                spawn_grains: &spawn_grains,
+                spawn_points: &spawn_points,
+                scale_points: &scale_points,
+            },
+        )
     }
 }
 
@@ -182,6 +335,12 @@ pub fn run<T: Transport, S: Solver>(
         true => Some(session.subscriber::<ZoneCell, StepHeader>(&names::ZONES)?),
         false => None,
     };
+    let adaptive = scene
+        .oracle
+        .as_ref()
+        .is_some_and(|o| o.kind == grains_protocol::scene::OracleKind::Surface)
+        && zones_sub.is_some();
+    let mut epochs = if adaptive { Some(EpochPorts::<T>::open(&session)?) } else { None };
     session.wait_until("the coupler, the oracle and the launcher", |_| {
         step_sub.publisher_count() >= 1
             && command_sub.publisher_count() >= 1
@@ -189,6 +348,7 @@ pub fn run<T: Transport, S: Solver>(
             && raster_pub.subscriber_count() >= 1
             && summary_pub.subscriber_count() >= 1
             && zones_sub.as_ref().is_none_or(|z| z.publisher_count() >= 1)
+            && epochs.as_mut().is_none_or(EpochPorts::connected)
     })?;
     let zones = match &mut zones_sub {
         Some(sub) => session.recv(sub, "the zone field", |h, cells| -> anyhow::Result<ZoneField> {
@@ -239,6 +399,14 @@ pub fn run<T: Transport, S: Solver>(
         })??;
         wait += wait_start.elapsed() - finish_time;
         compute += finish_time;
+        if let (Some(e), Some(z)) = (&mut epochs, &mut zones_sub)
+            && scene.epoch_after(window.step)
+        {
+            // Counted as compute: the oracle's planning is part of the step's work.
+            let t = Instant::now();
+            e.exchange(&session, scene, z, &window, solver)?;
+            compute += t.elapsed();
+        }
 
         let mut report = solver.report();
         report.checksum = sent_checksum;

@@ -63,11 +63,28 @@ pub fn layer(scene: &Scene, body: &Body, x: [f64; 3]) -> Layer {
     layer_of_depth(scene, depth(scene, body, x))
 }
 
-fn layer_of_depth(scene: &Scene, d: f64) -> Layer {
+/// Depths [m] where the hybrid band begins and ends: `coupling.discrete_layer` and
+/// `+ hybrid_band`, or a surface oracle's own band (`oracle.centre` ± `oracle.half_width`)
+/// when the scene sets one, so that its run starts from the zones it keeps.
+pub fn band(scene: &Scene) -> (f64, f64) {
     let c = &scene.coupling;
-    if d < c.discrete_layer {
+    let (mut centre, mut half) = (c.discrete_layer + 0.5 * c.hybrid_band, 0.5 * c.hybrid_band);
+    if let Some(o) = scene
+        .oracle
+        .as_ref()
+        .filter(|o| o.kind == grains_protocol::scene::OracleKind::Surface)
+    {
+        centre = o.centre.unwrap_or(centre);
+        half = o.half_width.unwrap_or(half);
+    }
+    (centre - half, centre + half)
+}
+
+fn layer_of_depth(scene: &Scene, d: f64) -> Layer {
+    let (begin, end) = band(scene);
+    if d < begin {
         Layer::Discrete
-    } else if d < c.discrete_layer + c.hybrid_band {
+    } else if d < end {
         Layer::Hybrid
     } else {
         Layer::Continuum
@@ -91,9 +108,9 @@ impl ZoneField {
     pub fn layered(scene: &Scene) -> Self {
         let (grid, _) = crate::grid::scene_grid(scene);
         let cells = cell_grid(&grid, scene.dim());
-        let c = &scene.coupling;
         // Interface in the middle of the band: negative on the discrete side.
-        let interface = c.discrete_layer + 0.5 * c.hybrid_band;
+        let (begin, end) = band(scene);
+        let interface = 0.5 * (begin + end);
         let mut by_cell = std::collections::BTreeMap::<u64, f64>::new();
         for body in scene.bodies.iter().filter(|b| b.model == Model::Hybrid) {
             let (lo, hi) = bounds(scene, body);
@@ -168,6 +185,24 @@ impl ZoneField {
             Ok(i) => zone_of_code(self.zones[i].zone).unwrap_or(Layer::Discrete),
             Err(_) => Layer::Discrete,
         }
+    }
+
+    /// The grid of the cells (one node less per used axis than the MPM grid).
+    pub fn cell_grid(&self) -> &Grid {
+        &self.cells
+    }
+
+    /// The zone of every cell, x fastest (discrete where not listed).
+    pub fn dense(&self) -> Vec<Zone> {
+        let mut out = vec![Zone::Discrete; self.cells.nodes.iter().product::<u64>() as usize];
+        for z in &self.zones {
+            out[z.cell as usize] = match zone_of_code(z.zone) {
+                Some(Layer::Continuum) => Zone::Continuum,
+                Some(Layer::Hybrid) => Zone::Hybrid,
+                _ => Zone::Discrete,
+            };
+        }
+        out
     }
 
     /// Number of listed cells in `layer`.

@@ -444,6 +444,61 @@ impl<S: Space> DemPipeline<S> {
         e
     }
 
+    /// The elastic force of every grain–grain contact of the last neighbour list (normal
+    /// spring and tangential anchor spring, no damping), unscaled by the hybrid weight:
+    /// (i, j, force on i from j) by storage index. For the grains' homogenized stress.
+    pub fn contact_forces(&self, state: &DemState<S>) -> Vec<(usize, usize, S::V)> {
+        let g = &state.grains;
+        let (period, half) = periods(state);
+        let mut out = Vec::new();
+        for p in &self.neighbors.pairs {
+            let (i, j) = (p.i as usize, p.j as usize);
+            if i >= g.len() || j >= g.len() {
+                continue;
+            }
+            let d = separation::<S>(g.x[i], g.x[j], period, half);
+            let dist = d.length();
+            let overlap = g.radius[i] + g.radius[j] - dist;
+            if (overlap <= 0.0 && !p.state.bonded) || dist == 0.0 {
+                continue;
+            }
+            let m = &state.params.materials[g.material[i] as usize];
+            let mut st = p.state;
+            let c = contact_force::<S>(m, overlap, d * (1.0 / dist), S::V::default(), 0.0, 1.0, 0.0, &mut st);
+            if c.active {
+                out.push((i, j, c.force));
+            }
+        }
+        out
+    }
+
+    /// The elastic force of every grain–wall contact of the last neighbour list, unscaled
+    /// like [`DemPipeline::contact_forces`]: (grain, contact point on the wall, force on the
+    /// grain) by storage index.
+    pub fn wall_contact_forces(&self, state: &DemState<S>) -> Vec<(usize, S::V, S::V)> {
+        let g = &state.grains;
+        let mut out = Vec::new();
+        for w in &self.neighbors.walls {
+            let i = w.grain as usize;
+            if i >= g.len() {
+                continue;
+            }
+            let wall = &state.walls[w.wall as usize];
+            let (gap, n, _) = wall_geometry(&wall.shape, g.x[i], wall.velocity, wall.spin);
+            if gap >= g.radius[i] && !w.state.bonded {
+                continue;
+            }
+            let mut params = state.params.materials[g.material[i] as usize];
+            params.friction = wall.friction;
+            let mut st = w.state;
+            let c = contact_force::<S>(&params, g.radius[i] - gap, n, S::V::default(), 0.0, 1.0, 0.0, &mut st);
+            if c.active {
+                out.push((i, g.x[i] - n * gap, c.force));
+            }
+        }
+        out
+    }
+
     /// Gravitational potential energy −Σ m g·x [J].
     pub fn potential_energy(state: &DemState<S>) -> f64 {
         let g = &state.grains;

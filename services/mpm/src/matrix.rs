@@ -24,6 +24,8 @@ pub trait Matrix:
     fn sym_eigen(&self) -> ([f64; 3], Self);
     /// Q diag(values) Qᵀ, exactly symmetric.
     fn from_eigen(values: [f64; 3], q: &Self) -> Self;
+    /// The leading DIM × DIM block of a 3 × 3 matrix given by rows.
+    fn from_rows3(a: [[f64; 3]; 3]) -> Self;
 }
 
 impl Matrix for DMat2 {
@@ -79,6 +81,10 @@ impl Matrix for DMat2 {
         let xy = v[0] * a.x * a.y + v[1] * b.x * b.y;
         let yy = v[0] * a.y * a.y + v[1] * b.y * b.y;
         DMat2::from_cols(DVec2::new(xx, xy), DVec2::new(xy, yy))
+    }
+    #[inline]
+    fn from_rows3(a: [[f64; 3]; 3]) -> Self {
+        DMat2::from_cols(DVec2::new(a[0][0], a[1][0]), DVec2::new(a[0][1], a[1][1]))
     }
 }
 
@@ -163,6 +169,14 @@ impl Matrix for DMat3 {
         let yz = wa.y * a.z + wb.y * b.z + wc.y * c.z;
         let zz = wa.z * a.z + wb.z * b.z + wc.z * c.z;
         DMat3::from_cols(DVec3::new(xx, xy, xz), DVec3::new(xy, yy, yz), DVec3::new(xz, yz, zz))
+    }
+    #[inline]
+    fn from_rows3(a: [[f64; 3]; 3]) -> Self {
+        DMat3::from_cols(
+            DVec3::new(a[0][0], a[1][0], a[2][0]),
+            DVec3::new(a[0][1], a[1][1], a[2][1]),
+            DVec3::new(a[0][2], a[1][2], a[2][2]),
+        )
     }
 }
 

@@ -60,6 +60,23 @@ impl Model {
         -tau.trace() / (M::DIM as f64 * jacobian)
     }
 
+    /// Kirchhoff stress τ of an elastic strain b^e.
+    pub fn kirchhoff<M: Matrix>(&self, b_e: &M) -> M {
+        match self {
+            Model::Elastic(m) | Model::Yue(m) => yue::kirchhoff(m, b_e),
+            Model::CriticalState(m) => chen::kirchhoff(m, b_e),
+        }
+    }
+
+    /// The elastic strain b^e of a Cauchy stress σ (new points made from grains, Yue 2018
+    /// §4.2).
+    pub fn strain_of_stress<M: Matrix>(&self, sigma: &M) -> M {
+        match self {
+            Model::Elastic(m) | Model::Yue(m) => yue::strain_of_stress(m, sigma),
+            Model::CriticalState(m) => chen::strain_of_stress(m, sigma),
+        }
+    }
+
     /// The packing fraction of a point: the critical-state model's state variable (eq. 8); for
     /// the others the initial one over J (they keep Φ0 in [`Points::packing`]).
     pub fn packing(&self, stored: f64, jacobian: f64) -> f64 {

@@ -31,7 +31,12 @@ pub struct Grain {
     pub radius: f64,
     /// [kg], not weighted by the zone.
     pub mass: f64,
+    /// The share of the mass the DEM counts now (1 or 1 − w).
+    pub share: f64,
     pub v: [f64; 3],
+    /// Part of the scene's fixed boundary (a frozen grain): dense and in the way of new
+    /// grains, but not material: never deleted, not counted in a cell's grain mass.
+    pub fixed: bool,
 }
 
 /// A material point as the oracle sees it: full (unweighted) mass.
@@ -41,6 +46,8 @@ pub struct Point {
     pub x: [f64; 3],
     /// [kg], not weighted by the zone.
     pub mass: f64,
+    /// The share of the mass the MPM counts now (1 or w).
+    pub share: f64,
     pub v: [f64; 3],
 }
 
@@ -86,6 +93,10 @@ pub struct Settings {
     pub bulk_density: f64,
     /// Placement attempts per grain of the enrichment front.
     pub attempts: usize,
+    /// The hybrid weight w (points' share in a hybrid cell; grains' 1 − w).
+    pub weight: f64,
+    /// Density of the grains [kg/m³] (the mass of a new grain).
+    pub grain_density: f64,
 }
 
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -98,6 +109,9 @@ pub struct Plan {
     pub delete_points: Vec<u64>,
     pub new_grains: Vec<NewGrain>,
     pub new_points: Vec<NewPoint>,
+    /// Existing points whose mass and volume are multiplied by a factor (id, factor): in a
+    /// cell whose models changed, so that its mass stays what it was.
+    pub scale_points: Vec<(u64, f64)>,
 }
 
 /// The cell (index into the zone arrays) of a position, if on the grid.
@@ -114,29 +128,46 @@ pub fn cell_of(cells: &Grid, dim: usize, x: [f64; 3]) -> Option<usize> {
     Some(linear(n, ijk))
 }
 
-/// One epoch. `nodes` is the MPM grid (its kernel spreads the grains' momentum and stress);
-/// `cells` its cells (one node less per used axis); `previous` the zone of every cell;
-/// `stress` the grains' stress per node ([`crate::homogenize::stress`]). New ids count up
-/// from `next_grain_id` and `next_point_id`. Deterministic from `rng`.
-#[allow(clippy::too_many_arguments)]
-pub fn plan<S: Space>(
-    nodes: &Grid,
-    kernel: Kernel,
-    cells: &Grid,
-    previous: &[Zone],
-    grains: &[Grain],
-    points: &[Point],
-    stress: &BTreeMap<u64, [[f64; 3]; 3]>,
-    s: &Settings,
-    (next_grain_id, next_point_id): (u64, u64),
-    rng: &mut Rng,
-) -> Plan {
+/// What an epoch looks at.
+pub struct Inputs<'a> {
+    /// The MPM grid (its kernel spreads the grains' momentum and stress) and its cells (one
+    /// node less per used axis).
+    pub nodes: &'a Grid,
+    pub kernel: Kernel,
+    pub cells: &'a Grid,
+    /// The zone of every cell before the epoch.
+    pub previous: &'a [Zone],
+    /// The cells behind the walls (dense like the material, so that a wall is not a free
+    /// surface; they keep their zone; empty: none).
+    pub solid: &'a [bool],
+    /// Whether a new grain of the largest radius centred at a point stays clear of the walls.
+    pub clear: &'a dyn Fn([f64; 3]) -> bool,
+    pub grains: &'a [Grain],
+    pub points: &'a [Point],
+    /// The grains' stress per node ([`crate::homogenize::stress`]).
+    pub stress: &'a BTreeMap<u64, [[f64; 3]; 3]>,
+}
+
+/// One epoch. New ids count up from `next_grain_id` and `next_point_id`. Deterministic from
+/// `rng`.
+pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_point_id): (u64, u64), rng: &mut Rng) -> Plan {
+    let Inputs {
+        nodes,
+        kernel,
+        cells,
+        previous,
+        solid,
+        clear,
+        grains,
+        points,
+        stress,
+    } = *input;
     let dim = S::DIM;
     let n = dims(cells, dim);
     let count: usize = n.iter().product();
     assert_eq!(previous.len(), count, "one previous zone per cell");
     let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
-    for g in grains {
+    for g in grains.iter().filter(|g| !g.fixed) {
         if let Some(c) = cell_of(cells, dim, g.x) {
             grain_mass[c] += g.mass;
         }
@@ -149,8 +180,15 @@ pub fn plan<S: Space>(
     // Alg. 7 on the grains; cells with material points are dense by the paper's ansatz.
     let disks: Vec<([f64; 3], f64)> = grains.iter().map(|g| (g.x, g.radius)).collect();
     let mut field = packing_fraction(cells, dim, &disks, 4);
-    for (f, &m) in field.iter_mut().zip(&point_mass) {
-        if m > 0.0 {
+    // Fixed grains are a wall: their cells are dense too.
+    let mut fixed = vec![false; count];
+    for g in grains.iter().filter(|g| g.fixed) {
+        if let Some(c) = cell_of(cells, dim, g.x) {
+            fixed[c] = true;
+        }
+    }
+    for (c, f) in field.iter_mut().enumerate() {
+        if point_mass[c] > 0.0 || fixed[c] || solid.get(c).copied().unwrap_or(false) {
             *f = 1.0;
         }
     }
@@ -158,8 +196,10 @@ pub fn plan<S: Space>(
     // A cell "lacks" a model when that model holds under half of what the other holds.
     let lacks_grains = |c: usize| point_mass[c] > 0.0 && grain_mass[c] < 0.5 * point_mass[c];
     let lacks_points = |c: usize| grain_mass[c] > 0.0 && point_mass[c] < 0.5 * grain_mass[c];
+    let is_solid = |c: usize| solid.get(c).copied().unwrap_or(false);
     let zones: Vec<Zone> = (0..count)
         .map(|c| match (previous[c], zone_of_distance(distance[c], s.centre, s.half_width)) {
+            (z, _) if is_solid(c) => z,
             (Zone::Continuum, Zone::Discrete) | (Zone::Discrete, Zone::Continuum) => Zone::Hybrid,
             (_, Zone::Discrete) if lacks_grains(c) => Zone::Hybrid,
             (_, Zone::Continuum) if lacks_points(c) => Zone::Hybrid,
@@ -167,15 +207,19 @@ pub fn plan<S: Space>(
         })
         .collect();
     let zone_at = |x: [f64; 3]| cell_of(cells, dim, x).map_or(Zone::Discrete, |c| zones[c]);
-    let delete_grains = grains.iter().filter(|g| zone_at(g.x) == Zone::Continuum).map(|g| g.id).collect();
-    let delete_points = points.iter().filter(|p| zone_at(p.x) == Zone::Discrete).map(|p| p.id).collect();
+    let delete_grains: Vec<u64> = grains
+        .iter()
+        .filter(|g| !g.fixed && zone_at(g.x) == Zone::Continuum)
+        .map(|g| g.id)
+        .collect();
+    let delete_points: Vec<u64> = points.iter().filter(|p| zone_at(p.x) == Zone::Discrete).map(|p| p.id).collect();
 
     // Homogenization: the grains' velocity on the nodes (mass-weighted, the MPM's kernel).
     let need_points: Vec<usize> = (0..count).filter(|&c| zones[c] == Zone::Hybrid && lacks_points(c)).collect();
     let mut new_points = Vec::new();
     if !need_points.is_empty() {
         let mut node_mp: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
-        for g in grains {
+        for g in grains.iter().filter(|g| !g.fixed) {
             for_each_node::<S>(nodes, kernel, S::from_array(g.x), |node, w, _| {
                 if w > 0.0 {
                     let e = node_mp.entry(node).or_default();
@@ -186,6 +230,31 @@ pub fn plan<S: Space>(
                 }
             });
         }
+        // Alg. 11 divides by h^d, right where the node's support is full of material; at a
+        // wall or the free surface part of it is empty. Divide instead by the part the grains
+        // fill (their volume under the weights over the material's packing), at most 4×.
+        let packing = s.bulk_density / s.grain_density;
+        let mut fill: BTreeMap<u64, f64> = BTreeMap::new();
+        let volume = |r: f64| {
+            if dim == 2 {
+                std::f64::consts::PI * r * r
+            } else {
+                4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
+            }
+        };
+        for g in grains.iter().filter(|g| !g.fixed) {
+            for_each_node::<S>(nodes, kernel, S::from_array(g.x), |node, w, _| {
+                *fill.entry(node).or_default() += w * volume(g.radius) / nodes.h.powi(dim as i32);
+            });
+        }
+        let stress: BTreeMap<u64, [[f64; 3]; 3]> = stress
+            .iter()
+            .map(|(&node, st)| {
+                let f = fill.get(&node).copied().unwrap_or(0.0);
+                let factor = if f > 0.0 { (packing / f).clamp(1.0, 4.0) } else { 1.0 };
+                (node, st.map(|row| row.map(|e| e * factor)))
+            })
+            .collect();
         let spacing = cells.h / s.points_per_axis.max(1) as f64;
         let per_cell = (s.points_per_axis.max(1) as usize).pow(dim as u32);
         for &c in &need_points {
@@ -236,12 +305,12 @@ pub fn plan<S: Space>(
                 max[k] = max[k].max(if k < dim { lo[k] + cells.h } else { lo[k] });
             }
         }
-        let inside = |x: [f64; 3]| cell_of(cells, dim, x).is_some_and(|c| need_grains.contains(&c));
+        let inside = |x: [f64; 3]| clear(x) && cell_of(cells, dim, x).is_some_and(|c| need_grains.contains(&c));
         let mut placed = enrichment::fill(dim, min, max, inside, &disks, s.radius_mean, s.radius_std, s.attempts, rng);
         // The front grows from the grains at the region's edge; a cell that no grain reaches
         // (points that flowed away from the grains) is filled on its own, from a random seed.
         let mut reached: BTreeSet<usize> = placed.iter().filter_map(|(x, _)| cell_of(cells, dim, *x)).collect();
-        reached.extend(grains.iter().filter_map(|g| cell_of(cells, dim, g.x)));
+        reached.extend(grains.iter().filter(|g| !g.fixed).filter_map(|g| cell_of(cells, dim, g.x)));
         for &c in need_grains.iter().filter(|c| !reached.contains(c)) {
             let lo = cell_corner(cells, n, c);
             let hi = [0, 1, 2].map(|k| if k < dim { lo[k] + cells.h } else { lo[k] });
@@ -250,7 +319,7 @@ pub fn plan<S: Space>(
                 dim,
                 lo,
                 hi,
-                |x| cell_of(cells, dim, x) == Some(c),
+                |x| clear(x) && cell_of(cells, dim, x) == Some(c),
                 &around,
                 s.radius_mean,
                 s.radius_std,
@@ -259,7 +328,12 @@ pub fn plan<S: Space>(
             );
             placed.extend(more);
         }
-        let sources: Vec<([f64; 3], [f64; 3])> = grains.iter().map(|g| (g.x, g.v)).chain(points.iter().map(|p| (p.x, p.v))).collect();
+        let sources: Vec<([f64; 3], [f64; 3])> = grains
+            .iter()
+            .filter(|g| !g.fixed)
+            .map(|g| (g.x, g.v))
+            .chain(points.iter().map(|p| (p.x, p.v)))
+            .collect();
         for (x, radius) in placed {
             let v = enrichment::neighbour_velocity(x, s.radius_mean, sources.iter().copied()).unwrap_or([0.0; 3]);
             new_grains.push(NewGrain {
@@ -270,6 +344,18 @@ pub fn plan<S: Space>(
             });
         }
     }
+    let scale_points = conserve_mass(
+        cells,
+        dim,
+        &zones,
+        grains,
+        points,
+        &delete_grains,
+        &delete_points,
+        &new_grains,
+        &mut new_points,
+        s,
+    );
     Plan {
         zones,
         distance,
@@ -277,7 +363,134 @@ pub fn plan<S: Space>(
         delete_points,
         new_grains,
         new_points,
+        scale_points,
     }
+}
+
+/// Per cell whose models changed (zone, deletions, new items), the factor on its points'
+/// mass that keeps the cell's mass what it was: the grains' share after the epoch is what it
+/// is (a grain's mass is its size), the points take the rest (Yue 2018 Alg. 14 sets the
+/// points' mass per cell the same way). Factors are kept within [1/2, 2] per cell; what a
+/// cell cannot keep that way (and all of it in a cell turning discrete, which has no points)
+/// goes to the nearest cells with points. New points take their cell's factor directly; the
+/// existing ones are listed.
+#[allow(clippy::too_many_arguments)]
+fn conserve_mass(
+    cells: &Grid,
+    dim: usize,
+    zones: &[Zone],
+    grains: &[Grain],
+    points: &[Point],
+    delete_grains: &[u64],
+    delete_points: &[u64],
+    new_grains: &[NewGrain],
+    new_points: &mut [NewPoint],
+    s: &Settings,
+) -> Vec<(u64, f64)> {
+    let count = zones.len();
+    let gone_g: BTreeSet<u64> = delete_grains.iter().copied().collect();
+    let gone_p: BTreeSet<u64> = delete_points.iter().copied().collect();
+    let grain_share = |z: Zone| if z == Zone::Hybrid { 1.0 - s.weight } else { 1.0 };
+    let point_share = |z: Zone| if z == Zone::Hybrid { s.weight } else { 1.0 };
+    let (mut before, mut after_g, mut after_p) = (vec![0.0; count], vec![0.0; count], vec![0.0; count]);
+    let mut changed = vec![false; count];
+    for g in grains.iter().filter(|g| !g.fixed) {
+        let Some(c) = cell_of(cells, dim, g.x) else { continue };
+        before[c] += g.share * g.mass;
+        if gone_g.contains(&g.id) {
+            changed[c] = true;
+        } else {
+            after_g[c] += grain_share(zones[c]) * g.mass;
+        }
+    }
+    let mass_of = |r: f64| {
+        if dim == 2 {
+            s.grain_density * std::f64::consts::PI * r * r
+        } else {
+            s.grain_density * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
+        }
+    };
+    for g in new_grains {
+        if let Some(c) = cell_of(cells, dim, g.x) {
+            after_g[c] += grain_share(zones[c]) * mass_of(g.radius);
+            changed[c] = true;
+        }
+    }
+    for p in points {
+        let Some(c) = cell_of(cells, dim, p.x) else { continue };
+        before[c] += p.share * p.mass;
+        if gone_p.contains(&p.id) {
+            changed[c] = true;
+        } else {
+            after_p[c] += point_share(zones[c]) * p.mass;
+        }
+    }
+    for p in new_points.iter() {
+        if let Some(c) = cell_of(cells, dim, p.x) {
+            after_p[c] += point_share(zones[c]) * p.mass;
+            changed[c] = true;
+        }
+    }
+    let mut factor: Vec<f64> = (0..count)
+        .map(|c| {
+            let moved = changed[c] || (after_g[c] + after_p[c] - before[c]).abs() > 1e-12 * before[c];
+            if !moved || after_p[c] <= 0.0 {
+                return 1.0;
+            }
+            ((before[c] - after_g[c]) / after_p[c]).clamp(0.5, 2.0)
+        })
+        .collect();
+    // What a cell cannot keep (a cell turning discrete: its grains carry what they carry;
+    // a factor at its bound) goes to the points of the nearest cells that have points, within
+    // three cells, in proportion to their mass: the total stays, the mass moves a cell or two.
+    let n = dims(cells, dim);
+    let ijk = |c: usize| [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
+    let residual: Vec<f64> = (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).collect();
+    for c in (0..count).filter(|&c| residual[c].abs() > 1e-12 * before[c].max(f64::MIN_POSITIVE)) {
+        let at = ijk(c);
+        for ring in 1..=3i64 {
+            let mut near = Vec::new();
+            let span = |k: usize| if k < dim { -ring..=ring } else { 0..=0 };
+            for dz in span(2) {
+                for dy in span(1) {
+                    for dx in span(0) {
+                        if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
+                            continue;
+                        }
+                        let q = [at[0] as i64 + dx, at[1] as i64 + dy, at[2] as i64 + dz];
+                        if (0..3).any(|k| q[k] < 0 || q[k] >= n[k] as i64) {
+                            continue;
+                        }
+                        let q = linear(n, q.map(|v| v as usize));
+                        if after_p[q] > 0.0 {
+                            near.push(q);
+                        }
+                    }
+                }
+            }
+            let total: f64 = near.iter().map(|&q| factor[q] * after_p[q]).sum();
+            if total > 0.0 {
+                for &q in &near {
+                    factor[q] *= 1.0 + residual[c] / total;
+                }
+                break;
+            }
+        }
+    }
+    for p in new_points.iter_mut() {
+        if let Some(c) = cell_of(cells, dim, p.x) {
+            p.mass *= factor[c];
+            p.volume *= factor[c];
+        }
+    }
+    points
+        .iter()
+        .filter(|p| !gone_p.contains(&p.id))
+        .filter_map(|p| {
+            let f = factor[cell_of(cells, dim, p.x)?];
+            (f != 1.0).then_some((p.id, f))
+        })
+        .collect()
 }
 
 fn cell_corner(cells: &Grid, n: [usize; 3], c: usize) -> [f64; 3] {
@@ -335,6 +548,8 @@ mod tests {
             points_per_axis: 2,
             bulk_density: 2500.0 * 0.82,
             attempts: 30,
+            weight: W,
+            grain_density: 2500.0,
         }
     }
 
@@ -358,7 +573,9 @@ mod tests {
                     x: [x, y, 0.0],
                     radius: R,
                     mass: disk_mass(R),
+                    share: 1.0,
                     v: V0,
+                    fixed: false,
                 });
                 x += 2.0 * R;
             }
@@ -388,8 +605,9 @@ mod tests {
         (m, p)
     }
 
-    /// Applies a plan: deletes, creates (points at their mass, grains at their disk's).
-    fn apply(plan: &Plan, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
+    /// Applies a plan: deletes, creates (points at their mass, grains at their disk's),
+    /// scales points, and gives every item the share of its cell's new zone.
+    fn apply(cells: &Grid, plan: &Plan, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
         grains.retain(|g| !plan.delete_grains.contains(&g.id));
         points.retain(|p| !plan.delete_points.contains(&p.id));
         grains.extend(plan.new_grains.iter().map(|g| Grain {
@@ -397,14 +615,23 @@ mod tests {
             x: g.x,
             radius: g.radius,
             mass: disk_mass(g.radius),
+            share: 1.0,
             v: g.v,
+            fixed: false,
         }));
+        for (id, f) in &plan.scale_points {
+            points.iter_mut().filter(|p| p.id == *id).for_each(|p| p.mass *= f);
+        }
         points.extend(plan.new_points.iter().map(|p| Point {
             id: p.id,
             x: p.x,
             mass: p.mass,
+            share: 1.0,
             v: p.v,
         }));
+        let hybrid = |x| cell_of(cells, 2, x).is_some_and(|c| plan.zones[c] == Zone::Hybrid);
+        grains.iter_mut().for_each(|g| g.share = if hybrid(g.x) { 1.0 - W } else { 1.0 });
+        points.iter_mut().for_each(|p| p.share = if hybrid(p.x) { W } else { 1.0 });
     }
 
     fn depth_of(cells: &Grid, c: usize, top: f64, right: f64) -> f64 {
@@ -431,13 +658,17 @@ mod tests {
         let mut rng = Rng::new(7);
         let ids = (grains.len() as u64, 0);
         let one = plan::<D2>(
-            &nodes,
-            Kernel::Gimp { half_width: 0.25 * H },
-            &cells,
-            &vec![Zone::Discrete; count],
-            &grains,
-            &points,
-            &BTreeMap::new(),
+            &Inputs {
+                nodes: &nodes,
+                kernel: Kernel::Gimp { half_width: 0.25 * H },
+                cells: &cells,
+                previous: &vec![Zone::Discrete; count],
+                solid: &[],
+                clear: &|_| true,
+                grains: &grains,
+                points: &points,
+                stress: &BTreeMap::new(),
+            },
             &s,
             ids,
             &mut rng,
@@ -475,7 +706,7 @@ mod tests {
             assert!(p.v.iter().zip(V0).all(|(a, b)| (a - b).abs() < 1e-12), "{:?}", p.v);
             assert_eq!(p.stress, [[0.0; 3]; 3]);
         }
-        apply(&one, &mut grains, &mut points);
+        apply(&cells, &one, &mut grains, &mut points);
         let after = totals(&cells, &one.zones, &grains, &points, true);
         assert!((after.0 - before.0).abs() < 1e-12 * before.0, "mass {} -> {}", before.0, after.0);
         assert!(
@@ -486,13 +717,17 @@ mod tests {
         );
 
         let two = plan::<D2>(
-            &nodes,
-            Kernel::Gimp { half_width: 0.25 * H },
-            &cells,
-            &one.zones,
-            &grains,
-            &points,
-            &BTreeMap::new(),
+            &Inputs {
+                nodes: &nodes,
+                kernel: Kernel::Gimp { half_width: 0.25 * H },
+                cells: &cells,
+                previous: &one.zones,
+                solid: &[],
+                clear: &|_| true,
+                grains: &grains,
+                points: &points,
+                stress: &BTreeMap::new(),
+            },
             &s,
             (1 << 20, 1 << 20),
             &mut rng,
@@ -505,7 +740,7 @@ mod tests {
             assert_eq!(two.zones[c], Zone::Continuum, "cell {c}");
         }
         assert!(!two.delete_grains.is_empty() && two.new_points.is_empty() && two.new_grains.is_empty());
-        apply(&two, &mut grains, &mut points);
+        apply(&cells, &two, &mut grains, &mut points);
         let last = totals(&cells, &two.zones, &grains, &points, true);
         assert!((last.0 - before.0).abs() < 1e-12 * before.0, "mass {} -> {}", before.0, last.0);
         assert!((0..3).all(|k| (last.1[k] - before.1[k]).abs() < 1e-12 * before.0));
@@ -542,6 +777,7 @@ mod tests {
                     id: points.len() as u64,
                     x: [(i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing, 0.0],
                     mass: s.bulk_density * spacing * spacing,
+                    share: 1.0,
                     v: V0,
                 });
             }
@@ -551,6 +787,7 @@ mod tests {
             id: 10_000,
             x: [0.045, 0.019, 0.0],
             mass: s.bulk_density * spacing * spacing,
+            share: 1.0,
             v: V0,
         });
         let previous: Vec<Zone> = (0..count)
@@ -565,13 +802,17 @@ mod tests {
         let before = totals(&cells, &previous, &grains, &points, false);
         let mut rng = Rng::new(3);
         let plan = plan::<D2>(
-            &nodes,
-            Kernel::Gimp { half_width: 0.25 * H },
-            &cells,
-            &previous,
-            &grains,
-            &points,
-            &BTreeMap::new(),
+            &Inputs {
+                nodes: &nodes,
+                kernel: Kernel::Gimp { half_width: 0.25 * H },
+                cells: &cells,
+                previous: &previous,
+                solid: &[],
+                clear: &|_| true,
+                grains: &grains,
+                points: &points,
+                stress: &BTreeMap::new(),
+            },
             &s,
             (5_000, 20_000),
             &mut rng,
@@ -618,7 +859,7 @@ mod tests {
         for g in &plan.new_grains {
             assert!(g.v.iter().zip(V0).all(|(a, b)| (a - b).abs() < 1e-12), "{:?}", g.v);
         }
-        apply(&plan, &mut grains, &mut points);
+        apply(&cells, &plan, &mut grains, &mut points);
         let after = totals(&cells, &plan.zones, &grains, &points, true);
         let change = (after.0 - before.0).abs() / before.0;
         eprintln!(
@@ -646,18 +887,23 @@ mod tests {
                 id: i as u64,
                 x: [((i % 20) as f64 + 0.5) * H, ((i / 20) as f64 + 0.5) * H, 0.0],
                 mass: 1e-3,
+                share: 1.0,
                 v: V0,
             })
             .collect();
         let previous = vec![Zone::Continuum; count];
         let plan = plan::<D2>(
-            &nodes,
-            Kernel::Bspline2,
-            &cells,
-            &previous,
-            &grains,
-            &points,
-            &BTreeMap::new(),
+            &Inputs {
+                nodes: &nodes,
+                kernel: Kernel::Bspline2,
+                cells: &cells,
+                previous: &previous,
+                solid: &[],
+                clear: &|_| true,
+                grains: &grains,
+                points: &points,
+                stress: &BTreeMap::new(),
+            },
             &s,
             (0, 0),
             &mut Rng::new(1),

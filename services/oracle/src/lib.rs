@@ -18,13 +18,8 @@ pub mod enrichment;
 pub mod epoch;
 pub mod homogenize;
 
-/// Where a cell lies relative to the reconciliation zone.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Zone {
-    Discrete,
-    Hybrid,
-    Continuum,
-}
+/// Where a cell lies relative to the reconciliation zone (the protocol's codes).
+pub use grains_protocol::wire::Zone;
 
 /// Cells along each axis (1 beyond `dim`).
 pub(crate) fn dims(cells: &Grid, dim: usize) -> [usize; 3] {

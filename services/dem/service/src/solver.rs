@@ -7,9 +7,11 @@ use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemState, WallShape};
 use grains_grid::{Grid, Kernel};
+use grains_protocol::scene::Model;
 use grains_protocol::scene::{GrainTransfer, Scene};
-use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
-use grains_service::solver::{Solver, SolverReport, StepWindow, set_component, view_stride};
+use grains_protocol::wire::{Command, Control, EpochItem, NodeStress, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
+use grains_service::zones::Layer;
 use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
@@ -23,8 +25,10 @@ pub struct DemSolver<S: Space> {
     /// `walls.csv`: per macro-step, the force of the grains on every wall and where the wall
     /// is (force–displacement curves of plates, penetrometers, drums).
     walls_log: Option<std::io::BufWriter<std::fs::File>>,
-    /// Kinetic energy above which the run is declared runaway [J].
+    /// Kinetic energy above which the run is declared runaway [J], and the domain's largest
+    /// extent it is computed with [m].
     energy_bound: f64,
+    extent: f64,
     /// The MPM's grid and kernel, for the raster of a coupled step.
     grid: Grid,
     kernel: Kernel,
@@ -42,12 +46,17 @@ pub struct DemSolver<S: Space> {
     /// and |g| [m/s²].
     quasi_static: f64,
     gravity: f64,
+    /// Grains the oracle creates: their material (index into the state's materials) and
+    /// density, the first hybrid body's; and the hybrid weight w.
+    spawn: Option<(u32, f64)>,
+    weight: f64,
 }
 
 impl<S: Space> DemSolver<S> {
     pub fn new(scene: &Scene, state: DemState<S>, out_dir: Option<&std::path::Path>) -> anyhow::Result<Self> {
         let pipeline = DemPipeline::new(scene.threads as usize)?;
-        let energy_bound = runaway_bound(scene, &state);
+        let extent = grains_service::grid::scene_extent(scene);
+        let energy_bound = runaway_bound(extent, S::from_array(scene.gravity).length(), &state);
         let (grid, kernel) = grains_service::grid::scene_grid(scene);
         let frames = match out_dir {
             Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir)?),
@@ -75,6 +84,7 @@ impl<S: Space> DemSolver<S> {
             out_dir: out_dir.map(std::path::Path::to_path_buf),
             walls_log,
             energy_bound,
+            extent,
             grid,
             kernel,
             hybrid: HashMap::new(),
@@ -83,6 +93,11 @@ impl<S: Space> DemSolver<S> {
             accel: HashMap::new(),
             quasi_static: scene.coupling.quasi_static,
             gravity: S::from_array(scene.gravity).length(),
+            spawn: scene.bodies.iter().find(|b| b.model == Model::Hybrid).map(|b| {
+                let index = scene.materials[..b.material].iter().filter(|m| m.dem.is_some()).count() as u32;
+                (index, scene.materials[b.material].density)
+            }),
+            weight: scene.coupling.weight,
         };
         if let Some((f, _)) = &mut solver.frames {
             f.write(0, &solver.state, &solver.pipeline)?;
@@ -120,13 +135,9 @@ impl<S: Space> DemSolver<S> {
 /// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
 /// energy every grain would have at the fastest wall's speed): a run that exceeds it is
 /// blowing up, not flowing.
-fn runaway_bound<S: Space>(scene: &Scene, state: &DemState<S>) -> f64 {
+fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64 {
     let g = &state.grains;
     let mass: f64 = g.mass.iter().sum();
-    let extent = (0..scene.dim())
-        .map(|k| scene.domain.max[k] - scene.domain.min[k])
-        .fold(0.0, f64::max);
-    let g_norm = scene.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
     let wall_speed = state
         .walls
         .iter()
@@ -327,6 +338,113 @@ impl<S: Space> Solver for DemSolver<S> {
             }
             _ => Err(format!("command {} (key {}) is not one the DEM takes", c.command, c.key)),
         }
+    }
+
+    /// Every grain, the frozen ones (the scene's fixed boundary) flagged.
+    fn epoch_items(&mut self, out: &mut Vec<EpochItem>) {
+        let g = &self.state.grains;
+        out.extend((0..g.len()).map(|i| EpochItem {
+            id: g.id[i],
+            radius: g.radius[i],
+            mass: g.mass[i],
+            share: g.scale[i],
+            flags: if g.frozen[i] { grains_protocol::wire::EPOCH_FIXED } else { 0 },
+            position: S::to_array(g.x[i]),
+            velocity: S::to_array(g.v[i]),
+        }));
+    }
+
+    /// Yue 2018 Alg. 11 over the contacts of the last step, grain–grain and grain–wall (the
+    /// grain's own half of the branch), at full stiffness (a hybrid grain's contacts carry
+    /// 1 − w of the load; the new points need the material's).
+    fn epoch_stress(&mut self, out: &mut Vec<NodeStress>) {
+        let g = &self.state.grains;
+        let contacts: Vec<grains_oracle::homogenize::Contact> = self
+            .pipeline
+            .contact_forces(&self.state)
+            .into_iter()
+            .map(|(i, j, f)| {
+                // Base j, tip i: the arm from j's centre to i's, the force on i; the contact
+                // point on the line between the centres, split by the radii.
+                let (xi, xj) = (S::to_array(g.x[i]), S::to_array(g.x[j]));
+                let share = g.radius[j] / (g.radius[i] + g.radius[j]);
+                grains_oracle::homogenize::Contact {
+                    point: std::array::from_fn(|k| xj[k] + share * (xi[k] - xj[k])),
+                    force: S::to_array(f),
+                    arm: std::array::from_fn(|k| xi[k] - xj[k]),
+                }
+            })
+            .collect();
+        // A grain on a wall: the wall's half of the branch, from the contact to the centre.
+        let walls = self.pipeline.wall_contact_forces(&self.state).into_iter().map(|(i, at, f)| {
+            let (xi, xc) = (S::to_array(g.x[i]), S::to_array(at));
+            grains_oracle::homogenize::Contact {
+                point: xc,
+                force: S::to_array(f),
+                arm: std::array::from_fn(|k| xi[k] - xc[k]),
+            }
+        });
+        let contacts: Vec<_> = contacts.into_iter().chain(walls).collect();
+        let stress = grains_oracle::homogenize::stress::<S>(&self.grid, self.kernel, &contacts);
+        out.extend(stress.into_iter().map(|(node, s)| NodeStress {
+            node,
+            stress: [s[0][0], s[1][1], s[2][2], s[1][2], s[0][2], s[0][1]],
+        }));
+    }
+
+    /// Deletes the listed grains (frozen ones stay: they are the scene's fixed boundary),
+    /// creates the new ones at rest spin, and weighs every grain by its cell's new zone: 1 − w
+    /// in a hybrid cell, 1 elsewhere. A grain that leaves the hybrid band drops the coupling
+    /// push it carried.
+    fn apply_epoch(&mut self, step: u64, changes: &EpochChanges<'_>) -> anyhow::Result<()> {
+        let g = &mut self.state.grains;
+        let delete: std::collections::HashSet<u64> = changes.delete.iter().copied().collect();
+        let keep: Vec<u32> = (0..g.len())
+            .filter(|&i| g.frozen[i] || !delete.contains(&g.id[i]))
+            .map(|i| i as u32)
+            .collect();
+        // Nothing changed, nothing rebuilt: an epoch that changes nothing leaves the run as
+        // it would be without one.
+        let mut changed = keep.len() != g.len() || !changes.spawn_grains.is_empty();
+        if keep.len() != g.len() {
+            g.permute(&keep);
+        }
+        if !changes.spawn_grains.is_empty() {
+            let Some((material, density)) = self.spawn else {
+                bail!("oracle epoch after step {step}: new grains, but the scene has no hybrid body to take their material from");
+            };
+            for n in changes.spawn_grains {
+                let x = S::from_array(n.position);
+                let i = g.push(
+                    n.id,
+                    x,
+                    n.radius,
+                    grains_dem::state::Grains::<S>::mass_of(n.radius, density),
+                    material,
+                );
+                g.v[i] = S::from_array(n.velocity);
+            }
+        }
+        for i in 0..g.len() {
+            let scale = match changes.zones.layer_at(S::to_array(g.x[i])) {
+                Layer::Hybrid if !g.frozen[i] => 1.0 - self.weight,
+                _ => 1.0,
+            };
+            if scale != g.scale[i] {
+                changed = true;
+                if scale == 1.0 {
+                    g.external[i] = S::V::default();
+                }
+                g.scale[i] = scale;
+            }
+        }
+        if changed {
+            self.pipeline.invalidate();
+        }
+        if !changes.spawn_grains.is_empty() {
+            self.energy_bound = self.energy_bound.max(runaway_bound(self.extent, self.gravity, &self.state));
+        }
+        Ok(())
     }
 
     fn report(&self) -> SolverReport {

@@ -3,13 +3,15 @@
 
 use anyhow::bail;
 use grains_grid::Vector;
+use grains_mpm::matrix::Matrix;
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline};
 use grains_mpm::points::{Points, totals};
 use grains_protocol::scene::Scene;
-use grains_protocol::wire::{Command, Control, NodeVelocity, Param, RasterNode, ViewPoint};
-use grains_service::solver::{Solver, SolverReport, StepWindow, set_component, view_stride};
+use grains_protocol::wire::{Command, Control, EpochItem, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
 use grains_service::vtu::{Field, PointFrames, Values};
+use grains_service::zones::Layer;
 
 pub struct MpmSolver<S: MpmSpace> {
     pub points: Points<S>,
@@ -18,16 +20,22 @@ pub struct MpmSolver<S: MpmSpace> {
     frames: Option<(PointFrames, u64)>,
     /// The run's output directory (for a snapshot when frames are off).
     out_dir: Option<std::path::PathBuf>,
-    /// Kinetic energy above which the run is declared runaway [J].
+    /// Kinetic energy above which the run is declared runaway [J], and the domain's largest
+    /// extent it is computed with [m].
     energy_bound: f64,
+    extent: f64,
     /// The predicted grid momentum of the current step (coupled runs).
     raster: Vec<RasterNode>,
+    /// New points' packing fraction (the material's) and the hybrid weight w.
+    packing: f64,
+    weight: f64,
 }
 
 impl<S: MpmSpace> MpmSolver<S> {
     pub fn new(scene: &Scene, points: Points<S>, params: MpmParams<S>, out_dir: Option<&std::path::Path>) -> anyhow::Result<Self> {
         let pipeline = MpmPipeline::new(scene.threads as usize).map_err(anyhow::Error::msg)?;
-        let energy_bound = runaway_bound(scene, &points, &params);
+        let extent = grains_service::grid::scene_extent(scene);
+        let energy_bound = runaway_bound(extent, &points, &params);
         let frames = match out_dir {
             Some(dir) if scene.output.frames_every > 0 => Some((PointFrames::new(dir, "points")?, scene.output.frames_every)),
             _ => None,
@@ -39,7 +47,14 @@ impl<S: MpmSpace> MpmSolver<S> {
             frames,
             out_dir: out_dir.map(std::path::Path::to_path_buf),
             energy_bound,
+            extent,
             raster: Vec::new(),
+            packing: scene
+                .materials
+                .iter()
+                .find_map(|m| m.mpm.as_ref().map(|m| m.packing))
+                .unwrap_or(1.0),
+            weight: scene.coupling.weight,
         };
         solver.write_frame(0)?;
         Ok(solver)
@@ -92,11 +107,8 @@ impl<S: MpmSpace> MpmSolver<S> {
 /// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
 /// energy of all the material at the fastest wall's speed): a run that exceeds it is blowing up,
 /// not flowing.
-fn runaway_bound<S: MpmSpace>(scene: &Scene, pts: &Points<S>, params: &MpmParams<S>) -> f64 {
+fn runaway_bound<S: MpmSpace>(extent: f64, pts: &Points<S>, params: &MpmParams<S>) -> f64 {
     let mass: f64 = pts.mass.iter().sum();
-    let extent = (0..scene.dim())
-        .map(|k| scene.domain.max[k] - scene.domain.min[k])
-        .fold(0.0, f64::max);
     let g = params.gravity.length();
     let wall_speed = params.walls.iter().map(|w| w.velocity.length()).fold(0.0, f64::max);
     // Confining loads can accelerate the whole body across the domain at most.
@@ -236,6 +248,67 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             }
             _ => Err(format!("command {} (key {}) is not one the MPM takes", c.command, c.key)),
         }
+    }
+
+    fn epoch_items(&mut self, out: &mut Vec<EpochItem>) {
+        let p = &self.points;
+        out.extend((0..p.len()).map(|k| EpochItem {
+            id: p.id[k],
+            radius: 0.0,
+            mass: p.mass[k],
+            share: p.weight[k],
+            flags: 0,
+            position: S::to_array(p.x[k]),
+            velocity: S::to_array(p.v[k]),
+        }));
+    }
+
+    /// Deletes the listed points, scales the mass and volume of the listed ones, creates the
+    /// new ones (their elastic strain from the homogenized stress, Yue 2018 §4.2), and weighs
+    /// every point by its cell's new zone: w in a hybrid cell, 1 elsewhere.
+    fn apply_epoch(&mut self, step: u64, changes: &EpochChanges<'_>) -> anyhow::Result<()> {
+        let p = &mut self.points;
+        if !p.loads.is_empty() && !changes.delete.is_empty() {
+            bail!(
+                "oracle epoch after step {step}: points under a confining load cannot be deleted (adaptive zones and confined bodies do not mix)"
+            );
+        }
+        let delete: std::collections::HashSet<u64> = changes.delete.iter().copied().collect();
+        let keep: Vec<u32> = (0..p.len()).filter(|&k| !delete.contains(&p.id[k])).map(|k| k as u32).collect();
+        if keep.len() != p.len() {
+            p.permute(&keep);
+        }
+        if !changes.scale_points.is_empty() {
+            let factor: std::collections::HashMap<u64, f64> = changes.scale_points.iter().map(|s| (s.id, s.factor)).collect();
+            for k in 0..p.len() {
+                if let Some(f) = factor.get(&p.id[k]) {
+                    p.mass[k] *= f;
+                    p.volume[k] *= f;
+                }
+            }
+        }
+        let model = self.params.model;
+        for n in changes.spawn_points {
+            let v = n.stress;
+            let sigma = <S::M as Matrix>::from_rows3([[v[0], v[5], v[4]], [v[5], v[1], v[3]], [v[4], v[3], v[2]]]);
+            let b_e = model.strain_of_stress(&sigma);
+            p.push(S::from_array(n.position), n.mass, n.volume, self.packing);
+            let k = p.len() - 1;
+            p.id[k] = n.id;
+            p.v[k] = S::from_array(n.velocity);
+            p.b_e[k] = b_e;
+            p.tau[k] = model.kirchhoff(&b_e);
+        }
+        for k in 0..p.len() {
+            p.weight[k] = match changes.zones.layer_at(S::to_array(p.x[k])) {
+                Layer::Hybrid => self.weight,
+                _ => 1.0,
+            };
+        }
+        if !changes.spawn_points.is_empty() || !changes.scale_points.is_empty() {
+            self.energy_bound = self.energy_bound.max(runaway_bound(self.extent, &self.points, &self.params));
+        }
+        Ok(())
     }
 
     fn report(&self) -> SolverReport {

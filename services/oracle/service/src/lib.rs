@@ -1,39 +1,81 @@
 //! The grains-oracle participant: decides which grid cells are discrete, hybrid or continuum
 //! and tells the solvers over `grains/oracle/zones`.
 //!
-//! In this build the zones are layered from the scene (Yue 2018 §4.3,
-//! [`grains_service::zones::ZoneField::layered`]) and fixed to the material: the oracle sends
-//! the field once, before the first step (header step 0), then follows the steps so that it
-//! ends with the run and accounts for itself in `metrics.csv` (items: cells of the field,
-//! nodes: hybrid cells). The adaptive oracle replaces how the field is computed and sends
-//! changes every `oracle.every` steps.
+//! At start it sends the layered zones of the scene (Yue 2018 §4.3,
+//! [`grains_service::zones::ZoneField::layered`]), with header step 0, before the solvers
+//! build their grains and points. With `oracle.kind = "fixed"` (the default) that is all: the
+//! zones stay with the material. With `"surface"` it holds an epoch after every
+//! `oracle.every` steps (Yue 2018 Alg. 7–9, [`grains_oracle::epoch::plan`]): it takes every
+//! grain (`grains/dem/epoch`), the grains' stress per node (`grains/dem/stress`) and every
+//! point (`grains/mpm/epoch`) of that step, and answers with the new zones and, per solver,
+//! the items to delete and to create. Its summary of an epoch step carries the total mass and
+//! momentum before the epoch (the solvers' summaries of the same step, those after it) and
+//! the epoch's time as its compute time; on other steps mass and momentum are 0.
 
 use anyhow::bail;
+use grains_grid::{D2, D3};
+use grains_oracle::epoch::{self, Grain, Point, Settings};
 use grains_protocol::names;
-use grains_protocol::scene::{OracleKind, Scene};
-use grains_protocol::wire::{StepBegin, StepHeader, Summary, ZoneCell};
+use grains_protocol::scene::{Dimension, Model, OracleKind, Scene};
+use grains_protocol::wire::{EpochItem, NodeStress, PointScale, SpawnGrain, SpawnPoint, StepBegin, StepHeader, Summary, Zone, ZoneCell};
 use grains_protocol::{Role, checksum::checksum_bytes};
-use grains_service::solver::{ParticipantOptions, SolverReport, join, next_step, publish_summary};
+use grains_service::session::Session;
+use grains_service::solver::{ParticipantOptions, SolverReport, StepWindow, join, next_step, publish_summary};
 use grains_service::zones::{Layer, ZoneField};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-/// Checks what the oracle needs of a scene: the kinds of oracle this build has.
+/// Checks what the oracle needs of a scene: the kinds of oracle this build has, and for
+/// `"surface"` a hybrid body whose material has grains and a continuum (new grains take its
+/// radii, new points its density).
 pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneError> {
+    let err = |field: &str, message: String| grains_protocol::scene::SceneError {
+        path: scene.path.clone(),
+        line_col: None,
+        field: Some(field.into()),
+        message,
+    };
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
-        Some(kind) => {
-            let kind = if kind == OracleKind::Layered { "layered" } else { "surface" };
-            Err(grains_protocol::scene::SceneError {
-                path: scene.path.clone(),
-                line_col: None,
-                field: Some("oracle.kind".into()),
-                message: format!(
-                    "\"{kind}\" zones (moving with the flow) are not in this build; allowed: \"fixed\" (layered from the scene at start, kept by the material)"
-                ),
-            })
-        }
+        Some(OracleKind::Surface) => match settings(scene) {
+            Some(_) => Ok(()),
+            None => Err(err(
+                "oracle.kind",
+                "\"surface\" needs a body with model = \"hybrid\" whose material has both [material.dem] and [material.mpm]".into(),
+            )),
+        },
+        Some(OracleKind::Layered) => Err(err(
+            "oracle.kind",
+            "\"layered\" zones that move with the flow are not in this build; allowed: \"fixed\" (layered from the scene at start, \
+             kept by the material) and \"surface\" (from the grains' packing fraction every oracle.every steps)"
+                .into(),
+        )),
     }
+}
+
+/// The epoch settings of a surface oracle: the band at `oracle.centre` ± `oracle.half_width`
+/// inside the isocontour (by default where the layered zones put it: centre
+/// `discrete_layer + hybrid_band / 2`, half-width `hybrid_band / 2`), new grains and points of
+/// the first hybrid body's material.
+pub fn settings(scene: &Scene) -> Option<Settings> {
+    let body = scene.bodies.iter().find(|b| b.model == Model::Hybrid)?;
+    let material = &scene.materials[body.material];
+    let (dem, mpm) = (material.dem.as_ref()?, material.mpm.as_ref()?);
+    let c = &scene.coupling;
+    let o = scene.oracle.as_ref();
+    Some(Settings {
+        critical_packing: o.map_or(0.5, |o| o.critical_packing),
+        centre: o.and_then(|o| o.centre).unwrap_or(c.discrete_layer + 0.5 * c.hybrid_band),
+        half_width: o.and_then(|o| o.half_width).unwrap_or(0.5 * c.hybrid_band),
+        radius_mean: dem.radius,
+        radius_std: dem.radius_std,
+        points_per_axis: scene.mpm.points_per_axis,
+        bulk_density: material.density * mpm.packing,
+        attempts: 30,
+        weight: c.weight,
+        grain_density: material.density,
+    })
 }
 
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
@@ -49,22 +91,23 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     let mut zones_pub = session.publisher::<ZoneCell, StepHeader>(&names::ZONES, cells.len().max(1))?;
     let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+    let mut epochs = match scene.oracle.as_ref().map(|o| o.kind) {
+        Some(OracleKind::Surface) => Some(Epochs::<T>::open(&session, scene)?),
+        _ => None,
+    };
     session.wait_until("the DEM, the MPM, the coupler and the launcher", |_| {
-        zones_pub.subscriber_count() >= 2 && step_sub.publisher_count() >= 1 && summary_pub.subscriber_count() >= 1
+        zones_pub.subscriber_count() >= 2
+            && step_sub.publisher_count() >= 1
+            && summary_pub.subscriber_count() >= 1
+            && epochs.as_mut().is_none_or(Epochs::connected)
     })?;
     // Both solvers are subscribed: they build their grains and points from this field before
     // they declare themselves ready.
     let header = session.header(0, 0.0, scene.dt);
-    zones_pub.publish(cells.len(), |h, out| {
-        out.copy_from_slice(cells);
-        *h = header;
-        if opts.checksums {
-            h.checksum = checksum_bytes(as_bytes(out));
-        }
-    })?;
+    publish_zones(&mut zones_pub, header, cells, opts.checksums)?;
     session.ready()?;
 
-    let report = SolverReport {
+    let mut report = SolverReport {
         n_items: cells.len() as u64,
         n_nodes: field.count(Layer::Hybrid) as u64,
         ..SolverReport::default()
@@ -75,7 +118,392 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
         };
-        publish_summary(&session, &mut summary_pub, &window, &report, compute, wait_start.elapsed())?;
+        let mut wait = wait_start.elapsed();
+        report.mass = 0.0;
+        report.momentum = [0.0; 3];
+        if let Some(e) = &mut epochs
+            && scene.epoch_after(window.step)
+        {
+            let (w, c) = e.epoch(&session, scene, &window, &mut zones_pub, &mut report, opts.checksums)?;
+            wait += w;
+            compute += c;
+        }
+        publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
         compute = Duration::ZERO;
     }
+}
+
+fn publish_zones<P: Publisher<ZoneCell, StepHeader>>(
+    zones_pub: &mut P,
+    header: StepHeader,
+    cells: &[ZoneCell],
+    checksums: bool,
+) -> anyhow::Result<()> {
+    zones_pub.publish(cells.len(), |h, out| {
+        out.copy_from_slice(cells);
+        *h = header;
+        if checksums {
+            h.checksum = checksum_bytes(as_bytes(out));
+        }
+    })?;
+    Ok(())
+}
+
+/// What one epoch sends: the zones (non-discrete cells) and each solver's lists, and the
+/// total mass and momentum before it (for the summary).
+#[derive(Clone, Debug, Default)]
+pub struct EpochMessages {
+    pub zones: Vec<ZoneCell>,
+    pub delete_grains: Vec<u64>,
+    pub delete_points: Vec<u64>,
+    pub spawn_grains: Vec<SpawnGrain>,
+    pub spawn_points: Vec<SpawnPoint>,
+    pub scale_points: Vec<PointScale>,
+    pub mass_before: f64,
+    pub momentum_before: [f64; 3],
+    /// Hybrid cells after the epoch.
+    pub hybrid_cells: u64,
+}
+
+/// The surface oracle between epochs: plain data, so that a test can drive epochs without a
+/// transport.
+pub struct OracleState {
+    pub settings: Settings,
+    /// The zone of every cell.
+    pub zones: Vec<Zone>,
+    next_ids: (u64, u64),
+    rng: grains_dem::packing::Rng,
+}
+
+impl OracleState {
+    /// At the start of a run: the scene's layered zones.
+    pub fn new(scene: &Scene) -> anyhow::Result<Self> {
+        check_scene(scene)?;
+        Ok(OracleState {
+            settings: settings(scene).ok_or_else(|| anyhow::anyhow!("the scene has no surface oracle"))?,
+            zones: ZoneField::layered(scene).dense(),
+            next_ids: (0, 0),
+            rng: grains_dem::packing::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
+        })
+    }
+
+    /// One epoch at `time` over the DEM's grains and stress and the MPM's points.
+    pub fn epoch(&mut self, scene: &Scene, time: f64, grains: &[EpochItem], stress: &[NodeStress], points: &[EpochItem]) -> EpochMessages {
+        let (mut mass, mut momentum) = (0.0, [0.0; 3]);
+        for it in grains.iter().chain(points) {
+            mass += it.share * it.mass;
+            (0..3).for_each(|k| momentum[k] += it.share * it.mass * it.velocity[k]);
+        }
+        let stress: BTreeMap<u64, [[f64; 3]; 3]> = stress.iter().map(|n| (n.node, from_voigt(n.stress))).collect();
+        let grains_in: Vec<Grain> = grains
+            .iter()
+            .map(|g| Grain {
+                id: g.id,
+                x: g.position,
+                radius: g.radius,
+                mass: g.mass,
+                share: g.share,
+                v: g.velocity,
+                fixed: g.flags & grains_protocol::wire::EPOCH_FIXED != 0,
+            })
+            .collect();
+        let points_in: Vec<Point> = points
+            .iter()
+            .map(|p| Point {
+                id: p.id,
+                x: p.position,
+                mass: p.mass,
+                share: p.share,
+                v: p.velocity,
+            })
+            .collect();
+        // New ids above every id either solver has used.
+        let max_id = |items: &[EpochItem]| items.iter().map(|i| i.id + 1).max().unwrap_or(0);
+        self.next_ids = (self.next_ids.0.max(max_id(grains)), self.next_ids.1.max(max_id(points)));
+        let (nodes, kernel) = grains_service::grid::scene_grid(scene);
+        let cells = *ZoneField::layered(scene).cell_grid();
+        let solid = solid_cells(scene, &cells, time);
+        let r_max = self.settings.radius_mean + 2.0 * self.settings.radius_std;
+        let clear = |x: [f64; 3]| wall_clearance(scene, x, time) >= r_max;
+        let input = epoch::Inputs {
+            nodes: &nodes,
+            kernel,
+            cells: &cells,
+            previous: &self.zones,
+            solid: &solid,
+            clear: &clear,
+            grains: &grains_in,
+            points: &points_in,
+            stress: &stress,
+        };
+        let plan = match scene.dimension {
+            Dimension::Two => epoch::plan::<D2>(&input, &self.settings, self.next_ids, &mut self.rng),
+            Dimension::Three => epoch::plan::<D3>(&input, &self.settings, self.next_ids, &mut self.rng),
+        };
+        if std::env::var_os("GRAINS_ORACLE_MAP").is_some() && scene.dim() == 2 {
+            eprint!("{}", zone_map(&cells, &plan, &solid, time));
+        }
+        self.next_ids.0 += plan.new_grains.len() as u64;
+        self.next_ids.1 += plan.new_points.len() as u64;
+        let zones = plan
+            .zones
+            .iter()
+            .enumerate()
+            .filter(|(_, z)| **z != Zone::Discrete)
+            .map(|(c, &z)| ZoneCell {
+                cell: c as u64,
+                zone: z as u32,
+                _pad: 0,
+                distance: plan.distance[c] - self.settings.centre,
+            })
+            .collect();
+        let out = EpochMessages {
+            zones,
+            delete_grains: plan.delete_grains.clone(),
+            delete_points: plan.delete_points.clone(),
+            spawn_grains: plan
+                .new_grains
+                .iter()
+                .map(|g| SpawnGrain {
+                    id: g.id,
+                    radius: g.radius,
+                    position: g.x,
+                    velocity: g.v,
+                })
+                .collect(),
+            spawn_points: plan
+                .new_points
+                .iter()
+                .map(|p| SpawnPoint {
+                    id: p.id,
+                    volume: p.volume,
+                    mass: p.mass,
+                    position: p.x,
+                    velocity: p.v,
+                    stress: to_voigt(&p.stress),
+                })
+                .collect(),
+            scale_points: plan.scale_points.iter().map(|&(id, factor)| PointScale { id, factor }).collect(),
+            mass_before: mass,
+            momentum_before: momentum,
+            hybrid_cells: plan.zones.iter().filter(|z| **z == Zone::Hybrid).count() as u64,
+        };
+        self.zones = plan.zones;
+        out
+    }
+}
+
+/// The surface oracle's ports.
+struct Epochs<T: Transport> {
+    grains_sub: T::Subscriber<EpochItem, StepHeader>,
+    stress_sub: T::Subscriber<NodeStress, StepHeader>,
+    points_sub: T::Subscriber<EpochItem, StepHeader>,
+    spawn_grains: T::Publisher<SpawnGrain, StepHeader>,
+    spawn_points: T::Publisher<SpawnPoint, StepHeader>,
+    delete_grains: T::Publisher<u64, StepHeader>,
+    delete_points: T::Publisher<u64, StepHeader>,
+    scale_points: T::Publisher<PointScale, StepHeader>,
+    state: OracleState,
+}
+
+impl<T: Transport> Epochs<T> {
+    fn open(session: &Session<'_, T>, scene: &Scene) -> anyhow::Result<Self> {
+        Ok(Epochs {
+            grains_sub: session.subscriber(&names::DEM_EPOCH)?,
+            stress_sub: session.subscriber(&names::DEM_STRESS)?,
+            points_sub: session.subscriber(&names::MPM_EPOCH)?,
+            spawn_grains: session.publisher(&names::SPAWN_GRAINS, 256)?,
+            spawn_points: session.publisher(&names::SPAWN_POINTS, 256)?,
+            delete_grains: session.publisher(&names::DELETE_GRAINS, 256)?,
+            delete_points: session.publisher(&names::DELETE_POINTS, 256)?,
+            scale_points: session.publisher(&names::SCALE_POINTS, 256)?,
+            state: OracleState::new(scene)?,
+        })
+    }
+
+    fn connected(&mut self) -> bool {
+        self.grains_sub.publisher_count() >= 1
+            && self.stress_sub.publisher_count() >= 1
+            && self.points_sub.publisher_count() >= 1
+            && self.spawn_grains.subscriber_count() >= 1
+            && self.spawn_points.subscriber_count() >= 1
+            && self.delete_grains.subscriber_count() >= 1
+            && self.delete_points.subscriber_count() >= 1
+            && self.scale_points.subscriber_count() >= 1
+    }
+
+    /// One epoch after `window.step`: (wait, compute) times.
+    fn epoch(
+        &mut self,
+        session: &Session<'_, T>,
+        scene: &Scene,
+        window: &StepWindow,
+        zones_pub: &mut T::Publisher<ZoneCell, StepHeader>,
+        report: &mut SolverReport,
+        checksums: bool,
+    ) -> anyhow::Result<(Duration, Duration)> {
+        let step = window.step;
+        let wait_start = Instant::now();
+        let grains = session.recv(
+            &mut self.grains_sub,
+            "the DEM's grains",
+            |h, items| -> anyhow::Result<Vec<EpochItem>> {
+                session.check_message(&names::DEM_EPOCH, h, step, items)?;
+                Ok(items.to_vec())
+            },
+        )??;
+        let stress = session.recv(
+            &mut self.stress_sub,
+            "the DEM's stress",
+            |h, s| -> anyhow::Result<Vec<NodeStress>> {
+                session.check_message(&names::DEM_STRESS, h, step, s)?;
+                Ok(s.to_vec())
+            },
+        )??;
+        let points = session.recv(
+            &mut self.points_sub,
+            "the MPM's points",
+            |h, items| -> anyhow::Result<Vec<EpochItem>> {
+                session.check_message(&names::MPM_EPOCH, h, step, items)?;
+                Ok(items.to_vec())
+            },
+        )??;
+        let wait = wait_start.elapsed();
+        let t = Instant::now();
+        let m = self.state.epoch(scene, window.time + window.dt, &grains, &stress, &points);
+        let header = session.header(step, window.time, window.dt);
+        publish_zones(zones_pub, header, &m.zones, checksums)?;
+        fn send<E: grains_transport::Pod + Copy, P: Publisher<E, StepHeader>>(
+            p: &mut P,
+            header: StepHeader,
+            items: &[E],
+        ) -> anyhow::Result<()> {
+            p.publish(items.len(), |h, out| {
+                *h = header;
+                out.copy_from_slice(items);
+            })?;
+            Ok(())
+        }
+        send(&mut self.delete_grains, header, &m.delete_grains)?;
+        send(&mut self.delete_points, header, &m.delete_points)?;
+        send(&mut self.spawn_grains, header, &m.spawn_grains)?;
+        send(&mut self.spawn_points, header, &m.spawn_points)?;
+        send(&mut self.scale_points, header, &m.scale_points)?;
+        report.mass = m.mass_before;
+        report.momentum = m.momentum_before;
+        report.n_items = m.zones.len() as u64;
+        report.n_nodes = m.hybrid_cells;
+        Ok((wait, t.elapsed()))
+    }
+}
+
+/// The zones of a 2D epoch as text (`GRAINS_ORACLE_MAP=1`, for debugging scenes): a row of
+/// letters per cell row, top first, D/H/C (lower case behind a wall), and what changes.
+fn zone_map(cells: &grains_grid::Grid, plan: &epoch::Plan, solid: &[bool], time: f64) -> String {
+    let n0 = cells.nodes[0] as usize;
+    let mut out = format!("grains-oracle: epoch at t = {time:.6} s\n");
+    for j in (0..cells.nodes[1] as usize).rev() {
+        let row: String = (j * n0..(j + 1) * n0)
+            .map(|c| {
+                let z = match plan.zones[c] {
+                    Zone::Discrete => 'D',
+                    Zone::Hybrid => 'H',
+                    Zone::Continuum => 'C',
+                };
+                if solid[c] { z.to_ascii_lowercase() } else { z }
+            })
+            .collect();
+        out.push_str(&row);
+        out.push('\n');
+    }
+    out.push_str(&format!(
+        "new grains {}, new points {}, deleted grains {}, deleted points {}, scaled points {}\n",
+        plan.new_grains.len(),
+        plan.new_points.len(),
+        plan.delete_grains.len(),
+        plan.delete_points.len(),
+        plan.scale_points.len()
+    ));
+    out
+}
+
+/// Distance from `x` to the nearest wall at `time` (walls translate at their scene velocity),
+/// negative behind one.
+pub fn wall_clearance(scene: &Scene, x: [f64; 3], time: f64) -> f64 {
+    let dim = scene.dim();
+    let dot = |a: [f64; 3], b: [f64; 3]| (0..dim).map(|k| a[k] * b[k]).sum::<f64>();
+    scene
+        .walls
+        .iter()
+        .map(|w| {
+            let at = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|k| p[k] + w.velocity[k] * time) };
+            match w.shape {
+                grains_protocol::scene::WallShape::Plane { point, normal } => {
+                    let p = at(point);
+                    dot(std::array::from_fn(|k| x[k] - p[k]), normal)
+                }
+                grains_protocol::scene::WallShape::Box { min, max } => {
+                    let (lo, hi) = (at(min), at(max));
+                    (0..dim).map(|k| (x[k] - lo[k]).min(hi[k] - x[k])).fold(f64::INFINITY, f64::min)
+                }
+                grains_protocol::scene::WallShape::Drum { center, radius } => {
+                    let c = at(center);
+                    radius - (0..2).map(|k| (x[k] - c[k]).powi(2)).sum::<f64>().sqrt()
+                }
+                grains_protocol::scene::WallShape::Segment { from, to } => {
+                    let (a, b) = (at(from), at(to));
+                    let ab: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
+                    let ax: [f64; 3] = std::array::from_fn(|k| x[k] - a[k]);
+                    let t = (dot(ax, ab) / dot(ab, ab).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+                    (0..dim).map(|k| (ax[k] - t * ab[k]).powi(2)).sum::<f64>().sqrt()
+                }
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The cells whose centre lies behind a wall at `time` (walls translate at their scene
+/// velocity): behind a plane, outside a box or a drum. Segments are thin: none.
+pub fn solid_cells(scene: &Scene, cells: &grains_grid::Grid, time: f64) -> Vec<bool> {
+    let dim = scene.dim();
+    let n = [0, 1, 2].map(|k| if k < dim { cells.nodes[k] as usize } else { 1 });
+    let mut out = vec![false; n.iter().product()];
+    for (c, solid) in out.iter_mut().enumerate() {
+        let ijk = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
+        let x: [f64; 3] = std::array::from_fn(|k| {
+            if k < dim {
+                cells.origin[k] + (ijk[k] as f64 + 0.5) * cells.h
+            } else {
+                0.0
+            }
+        });
+        *solid = scene.walls.iter().any(|w| {
+            let at = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|k| p[k] + w.velocity[k] * time) };
+            match w.shape {
+                grains_protocol::scene::WallShape::Plane { point, normal } => {
+                    let p = at(point);
+                    (0..dim).map(|k| (x[k] - p[k]) * normal[k]).sum::<f64>() < 0.0
+                }
+                grains_protocol::scene::WallShape::Box { min, max } => {
+                    let (lo, hi) = (at(min), at(max));
+                    (0..dim).any(|k| x[k] < lo[k] || x[k] > hi[k])
+                }
+                grains_protocol::scene::WallShape::Drum { center, radius } => {
+                    let c = at(center);
+                    (0..2).map(|k| (x[k] - c[k]).powi(2)).sum::<f64>() > radius * radius
+                }
+                grains_protocol::scene::WallShape::Segment { .. } => false,
+            }
+        });
+    }
+    out
+}
+
+/// Voigt order xx, yy, zz, yz, xz, xy (the protocol's).
+pub fn to_voigt(s: &[[f64; 3]; 3]) -> [f64; 6] {
+    [s[0][0], s[1][1], s[2][2], s[1][2], s[0][2], s[0][1]]
+}
+
+pub fn from_voigt(v: [f64; 6]) -> [[f64; 3]; 3] {
+    [[v[0], v[5], v[4]], [v[5], v[1], v[3]], [v[4], v[3], v[2]]]
 }
