@@ -372,7 +372,8 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
 /// is (a grain's mass is its size), the points take the rest (Yue 2018 Alg. 14 sets the
 /// points' mass per cell the same way). Factors are kept within [1/2, 2] per cell; what a
 /// cell cannot keep that way (and all of it in a cell turning discrete, which has no points)
-/// goes to the nearest cells with points. New points take their cell's factor directly; the
+/// goes to the nearest cells with points, whose factors stay within [1/2, 2] too (the rest
+/// is lost, and shows in the epoch's mass before and after). New points take their cell's factor directly; the
 /// existing ones are listed.
 #[allow(clippy::too_many_arguments)]
 fn conserve_mass(
@@ -470,8 +471,11 @@ fn conserve_mass(
             }
             let total: f64 = near.iter().map(|&q| factor[q] * after_p[q]).sum();
             if total > 0.0 {
+                // No point more than doubles or halves: a sliver of points next to a cell
+                // that turned discrete must not take a whole cell's mass (it would fly off).
+                let share = (residual[c] / total).clamp(-0.5, 1.0);
                 for &q in &near {
-                    factor[q] *= 1.0 + residual[c] / total;
+                    factor[q] = (factor[q] * (1.0 + share)).clamp(0.5, 2.0);
                 }
                 break;
             }
