@@ -1655,6 +1655,18 @@ mpm_nodes = 50
             "coupling.quasi_static",
             ">= 0",
         );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"surface\"\ncritical_packing = 1.5\n"),
+            Some(line + 1),
+            "oracle.critical_packing",
+            "< 1",
+        );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"surface\"\nhalf_width = -0.001\n"),
+            Some(line + 1),
+            "oracle.half_width",
+            ">= 0",
+        );
     }
 
     #[test]
