@@ -446,8 +446,9 @@ impl<S: Space> DemPipeline<S> {
 
     /// The elastic force of every grain–grain contact of the last neighbour list (normal
     /// spring and tangential anchor spring, no damping), unscaled by the hybrid weight:
-    /// (i, j, force on i from j) by storage index. For the grains' homogenized stress.
-    pub fn contact_forces(&self, state: &DemState<S>) -> Vec<(usize, usize, S::V)> {
+    /// (i, j, force on i from j, branch x_i − x_j by the minimum image) by storage index. For
+    /// the grains' homogenized stress.
+    pub fn contact_forces(&self, state: &DemState<S>) -> Vec<(usize, usize, S::V, S::V)> {
         let g = &state.grains;
         let (period, half) = periods(state);
         let mut out = Vec::new();
@@ -466,7 +467,7 @@ impl<S: Space> DemPipeline<S> {
             let mut st = p.state;
             let c = contact_force::<S>(m, overlap, d * (1.0 / dist), S::V::default(), 0.0, 1.0, 0.0, &mut st);
             if c.active {
-                out.push((i, j, c.force));
+                out.push((i, j, c.force, d));
             }
         }
         out

@@ -114,6 +114,38 @@ impl<S: MpmSpace> Points<S> {
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }
+
+    /// Keeps the points `keep` (indices, increasing) and drops the rest; loads of dropped
+    /// points go with them.
+    pub fn retain_indices(&mut self, keep: &[u32]) {
+        let mut new_index = vec![usize::MAX; self.len()];
+        for (k, &old) in keep.iter().enumerate() {
+            new_index[old as usize] = k;
+        }
+        let loads = std::mem::take(&mut self.loads);
+        fn select<T: Copy>(v: &mut Vec<T>, keep: &[u32]) {
+            let old = std::mem::take(v);
+            v.extend(keep.iter().map(|&k| old[k as usize]));
+        }
+        select(&mut self.id, keep);
+        select(&mut self.x, keep);
+        select(&mut self.v, keep);
+        select(&mut self.mass, keep);
+        select(&mut self.volume, keep);
+        select(&mut self.b_e, keep);
+        select(&mut self.tau, keep);
+        select(&mut self.weight, keep);
+        select(&mut self.affine, keep);
+        select(&mut self.jacobian, keep);
+        select(&mut self.packing, keep);
+        select(&mut self.plastic_strain, keep);
+        select(&mut self.plastic_rate, keep);
+        self.loads = loads
+            .into_iter()
+            .filter(|(i, _)| new_index[*i] != usize::MAX)
+            .map(|(i, f)| (new_index[i], f))
+            .collect();
+    }
 }
 
 /// A region to fill with points.
@@ -214,6 +246,21 @@ pub fn totals<S: MpmSpace>(pts: &Points<S>) -> (f64, S::V) {
 mod tests {
     use super::*;
     use grains_grid::{D2, D3};
+
+    /// Dropping points keeps the others in order with their loads re-indexed; a dropped
+    /// point's load goes with it.
+    #[test]
+    fn retain_keeps_order_and_loads() {
+        let mut p = Points::<D2>::default();
+        for k in 0..4 {
+            p.push(glam::DVec2::new(k as f64, 0.0), 1.0 + k as f64, 1.0, 0.8);
+        }
+        p.loads = vec![(2, glam::DVec2::new(0.0, -1.0)), (1, glam::DVec2::new(1.0, 0.0))];
+        p.retain_indices(&[0, 2, 3]);
+        assert_eq!(p.id, [0, 2, 3]);
+        assert_eq!(p.mass, [1.0, 3.0, 4.0]);
+        assert_eq!(p.loads, [(1, glam::DVec2::new(0.0, -1.0))]);
+    }
 
     #[test]
     fn seeding_fills_cells_evenly_and_respects_the_shape() {

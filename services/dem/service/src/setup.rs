@@ -147,7 +147,8 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
                     .grains
                     .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
                 state.grains.frozen[i] = a.kind == 2 || body.frozen;
-                state.grains.scale[i] = scale;
+                // Frozen grains are the boundary, not material: never weighed.
+                state.grains.scale[i] = if state.grains.frozen[i] { 1.0 } else { scale };
                 if !state.grains.frozen[i] {
                     state.grains.v[i] = S::from_array(body.velocity);
                 }
@@ -168,7 +169,7 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
                 .grains
                 .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
             state.grains.frozen[i] = body.frozen;
-            state.grains.scale[i] = scale;
+            state.grains.scale[i] = if body.frozen { 1.0 } else { scale };
             state.grains.v[i] = S::from_array(body.velocity);
             next_id += 1;
         }

@@ -363,19 +363,20 @@ impl<S: Space> Solver for DemSolver<S> {
             .pipeline
             .contact_forces(&self.state)
             .into_iter()
-            .map(|(i, j, f)| {
-                // Base j, tip i: the arm from j's centre to i's, the force on i; the contact
-                // point on the line between the centres, split by the radii.
-                let (xi, xj) = (S::to_array(g.x[i]), S::to_array(g.x[j]));
-                let share = g.radius[j] / (g.radius[i] + g.radius[j]);
+            .map(|(i, j, f, d)| {
+                // Base j, tip i: the arm from j's centre to i's (the minimum image across a
+                // periodic boundary), the force on i; the contact point on the arm, split by
+                // the radii, on i's side.
+                let (xi, arm) = (S::to_array(g.x[i]), S::to_array(d));
+                let share = g.radius[i] / (g.radius[i] + g.radius[j]);
                 grains_oracle::homogenize::Contact {
-                    point: std::array::from_fn(|k| xj[k] + share * (xi[k] - xj[k])),
+                    point: std::array::from_fn(|k| xi[k] - share * arm[k]),
                     force: S::to_array(f),
-                    arm: std::array::from_fn(|k| xi[k] - xj[k]),
+                    arm,
                 }
             })
             .collect();
-        // A grain on a wall: the wall's half of the branch, from the contact to the centre.
+        // A grain on a wall: the grain's half of the branch, from the contact to its centre.
         let walls = self.pipeline.wall_contact_forces(&self.state).into_iter().map(|(i, at, f)| {
             let (xi, xc) = (S::to_array(g.x[i]), S::to_array(at));
             grains_oracle::homogenize::Contact {

@@ -268,15 +268,15 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
     /// every point by its cell's new zone: w in a hybrid cell, 1 elsewhere.
     fn apply_epoch(&mut self, step: u64, changes: &EpochChanges<'_>) -> anyhow::Result<()> {
         let p = &mut self.points;
-        if !p.loads.is_empty() && !changes.delete.is_empty() {
-            bail!(
-                "oracle epoch after step {step}: points under a confining load cannot be deleted (adaptive zones and confined bodies do not mix)"
-            );
-        }
         let delete: std::collections::HashSet<u64> = changes.delete.iter().copied().collect();
         let keep: Vec<u32> = (0..p.len()).filter(|&k| !delete.contains(&p.id[k])).map(|k| k as u32).collect();
         if keep.len() != p.len() {
-            p.permute(&keep);
+            if p.loads.iter().any(|(k, _)| delete.contains(&p.id[*k])) {
+                bail!(
+                    "oracle epoch after step {step}: a point under a confining load would be deleted (adaptive zones and confined bodies do not mix)"
+                );
+            }
+            p.retain_indices(&keep);
         }
         if !changes.scale_points.is_empty() {
             let factor: std::collections::HashMap<u64, f64> = changes.scale_points.iter().map(|s| (s.id, s.factor)).collect();

@@ -38,13 +38,23 @@ pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneErr
     };
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
-        Some(OracleKind::Surface) => match settings(scene) {
-            Some(_) => Ok(()),
-            None => Err(err(
-                "oracle.kind",
-                "\"surface\" needs a body with model = \"hybrid\" whose material has both [material.dem] and [material.mpm]".into(),
-            )),
-        },
+        Some(OracleKind::Surface) => {
+            if settings(scene).is_none() {
+                return Err(err(
+                    "oracle.kind",
+                    "\"surface\" needs a body with model = \"hybrid\" whose material has both [material.dem] and [material.mpm]".into(),
+                ));
+            }
+            // Its zones cover every cell, so every body's material is converted: a "dem" or
+            // "mpm" body would be turned hybrid too. Frozen grains are the boundary: kept.
+            match scene.bodies.iter().position(|b| b.model != Model::Hybrid && !(b.model == Model::Dem && b.frozen)) {
+                Some(k) => Err(err(
+                    &format!("body.{k}.model"),
+                    "with oracle.kind = \"surface\" every body is \"hybrid\" (the zones move over all material), except frozen \"dem\" bodies".into(),
+                )),
+                None => Ok(()),
+            }
+        }
         Some(OracleKind::Layered) => Err(err(
             "oracle.kind",
             "\"layered\" zones that move with the flow are not in this build; allowed: \"fixed\" (layered from the scene at start, \
@@ -223,15 +233,14 @@ impl OracleState {
         let (nodes, kernel) = grains_service::grid::scene_grid(scene);
         let cells = *ZoneField::layered(scene).cell_grid();
         let solid = solid_cells(scene, &cells, time);
-        let r_max = self.settings.radius_mean + 2.0 * self.settings.radius_std;
-        let clear = |x: [f64; 3]| wall_clearance(scene, x, time) >= r_max;
+        let clearance = |x: [f64; 3]| wall_clearance(scene, x, time);
         let input = epoch::Inputs {
             nodes: &nodes,
             kernel,
             cells: &cells,
             previous: &self.zones,
             solid: &solid,
-            clear: &clear,
+            clearance: &clearance,
             grains: &grains_in,
             points: &points_in,
             stress: &stress,
