@@ -334,6 +334,23 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
             );
             placed.extend(more);
         }
+        // A cell's new grains stop once they hold its points' mass (the material they stand
+        // for): more would outweigh what the points can give up (their factor is bounded) and
+        // the cell would gain mass. In the order placed, so the front's side stays filled.
+        let mut held = vec![0.0; count];
+        placed.retain(|&(x, r)| {
+            let Some(c) = cell_of(cells, dim, x) else { return false };
+            let keep = held[c] < point_mass[c];
+            if keep {
+                held[c] += s.grain_density
+                    * if dim == 2 {
+                        std::f64::consts::PI * r * r
+                    } else {
+                        4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
+                    };
+            }
+            keep
+        });
         let sources: Vec<([f64; 3], [f64; 3])> = grains
             .iter()
             .filter(|g| !g.fixed)
