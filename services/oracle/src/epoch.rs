@@ -238,16 +238,9 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
         // fill (their volume under the weights over the material's packing), at most 4×.
         let packing = s.bulk_density / s.grain_density;
         let mut fill: BTreeMap<u64, f64> = BTreeMap::new();
-        let volume = |r: f64| {
-            if dim == 2 {
-                std::f64::consts::PI * r * r
-            } else {
-                4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
-            }
-        };
         for g in grains.iter().filter(|g| !g.fixed) {
             for_each_node::<S>(nodes, kernel, S::from_array(g.x), |node, w, _| {
-                *fill.entry(node).or_default() += w * volume(g.radius) / nodes.h.powi(dim as i32);
+                *fill.entry(node).or_default() += w * grain_volume(dim, g.radius) / nodes.h.powi(dim as i32);
             });
         }
         let stress: BTreeMap<u64, [[f64; 3]; 3]> = stress
@@ -342,12 +335,7 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
             let Some(c) = cell_of(cells, dim, x) else { return false };
             let keep = held[c] < point_mass[c];
             if keep {
-                held[c] += s.grain_density
-                    * if dim == 2 {
-                        std::f64::consts::PI * r * r
-                    } else {
-                        4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
-                    };
+                held[c] += s.grain_density * grain_volume(dim, r);
             }
             keep
         });
@@ -427,13 +415,7 @@ fn conserve_mass(
             after_g[c] += grain_share(zones[c]) * g.mass;
         }
     }
-    let mass_of = |r: f64| {
-        if dim == 2 {
-            s.grain_density * std::f64::consts::PI * r * r
-        } else {
-            s.grain_density * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
-        }
-    };
+    let mass_of = |r: f64| s.grain_density * grain_volume(dim, r);
     for g in new_grains {
         if let Some(c) = cell_of(cells, dim, g.x) {
             after_g[c] += grain_share(zones[c]) * mass_of(g.radius);
@@ -518,6 +500,15 @@ fn conserve_mass(
             (f != 1.0).then_some((p.id, f))
         })
         .collect()
+}
+
+/// Area of a disk (2D, per metre of thickness) or volume of a sphere (3D) of radius `r`.
+fn grain_volume(dim: usize, r: f64) -> f64 {
+    if dim == 2 {
+        std::f64::consts::PI * r * r
+    } else {
+        4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
+    }
 }
 
 fn cell_corner(cells: &Grid, n: [usize; 3], c: usize) -> [f64; 3] {
