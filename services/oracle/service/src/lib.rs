@@ -181,6 +181,8 @@ pub struct OracleState {
     pub settings: Settings,
     /// The zone of every cell.
     pub zones: Vec<Zone>,
+    /// The grid of the zone cells.
+    cells: grains_grid::Grid,
     next_ids: (u64, u64),
     rng: grains_dem::packing::Rng,
 }
@@ -189,9 +191,11 @@ impl OracleState {
     /// At the start of a run: the scene's layered zones.
     pub fn new(scene: &Scene) -> anyhow::Result<Self> {
         check_scene(scene)?;
+        let field = ZoneField::layered(scene);
         Ok(OracleState {
             settings: settings(scene).ok_or_else(|| anyhow::anyhow!("the scene has no surface oracle"))?,
-            zones: ZoneField::layered(scene).dense(),
+            zones: field.dense(),
+            cells: *field.cell_grid(),
             next_ids: (0, 0),
             rng: grains_dem::packing::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
         })
@@ -231,7 +235,7 @@ impl OracleState {
         let max_id = |items: &[EpochItem]| items.iter().map(|i| i.id + 1).max().unwrap_or(0);
         self.next_ids = (self.next_ids.0.max(max_id(grains)), self.next_ids.1.max(max_id(points)));
         let (nodes, kernel) = grains_service::grid::scene_grid(scene);
-        let cells = *ZoneField::layered(scene).cell_grid();
+        let cells = self.cells;
         let solid = solid_cells(scene, &cells, time);
         let clearance = |x: [f64; 3]| wall_clearance(scene, x, time);
         let input = epoch::Inputs {
