@@ -72,7 +72,7 @@ pub struct Domain {
 /// How grain contacts dissipate energy.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum DemDamping {
-    /// Restitution coefficient e of a head-on impact, in (0, 1].
+    /// Restitution coefficient e of a head-on impact, in [0, 1] (0: critically damped).
     Restitution(f64),
     /// Constant damping coefficient γ_n = γ_t [N s/m] (Chen 2021 Table 1).
     Viscous(f64),
@@ -847,7 +847,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                         None => stiffness_normal * 2.0 / 7.0,
                     },
                     damping: match (&g.restitution, &g.damping) {
-                        (Some(e), None) => DemDamping::Restitution(in_range(ctx, e, &f("restitution"), Open(0.0), Closed(1.0))?),
+                        (Some(e), None) => DemDamping::Restitution(in_range(ctx, e, &f("restitution"), Closed(0.0), Closed(1.0))?),
                         (None, Some(gm)) => DemDamping::Viscous(in_range(ctx, gm, &f("damping"), Closed(0.0), Bound::None)?),
                         (Some(e), Some(_)) => {
                             return Err(ctx.err(
@@ -860,7 +860,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                             return Err(ctx.err(
                                 Some(g.radius.span()),
                                 Some(&f("restitution")),
-                                "missing: give `restitution` (0 < e <= 1) or `damping` [N s/m]".into(),
+                                "missing: give `restitution` (0 <= e <= 1) or `damping` [N s/m]".into(),
                             ));
                         }
                     },

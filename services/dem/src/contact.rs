@@ -41,7 +41,8 @@ pub struct ContactParams {
 /// Normal (and tangential) damping of a contact.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Damping {
-    /// From the restitution coefficient e ∈ (0, 1] and the pair's reduced mass.
+    /// From the restitution coefficient e ∈ [0, 1] (0: critically damped) and the pair's
+    /// reduced mass.
     Restitution(f64),
     /// A constant coefficient γ [N s/m].
     Viscous(f64),
@@ -84,6 +85,10 @@ impl ContactParams {
 
 /// γ_n / √m for restitution e and stiffness k [N/m]: −2 ln e √(k / (π² + ln² e)).
 pub fn damping_factor(restitution: f64, stiffness: f64) -> f64 {
+    if restitution == 0.0 {
+        // The limit e → 0: critical damping, γ = 2 √(m k).
+        return 2.0 * stiffness.sqrt();
+    }
     let ln_e = restitution.ln();
     -2.0 * ln_e * (stiffness / (std::f64::consts::PI.powi(2) + ln_e * ln_e)).sqrt()
 }

@@ -55,8 +55,8 @@ fn assert_close(actual: f64, expected: f64, rel: f64, what: &str) {
 
 /// Two equal grains meet head-on at ±v; the rebound speed over the approach speed is the
 /// restitution coefficient the damping was derived from (analytic for the linear
-/// spring–dashpot: e = exp(−πζ/√(1−ζ²))).
-fn restitution<S: Space>(e: f64) -> f64 {
+/// spring–dashpot: e = exp(−πζ/√(1−ζ²))). Also the gap between the grains at the end.
+fn impact<S: Space>(e: f64) -> (f64, f64) {
     let mut st = state::<S>(params(e, 0.5), [0.0; 3]);
     let m = mass::<S>();
     let v0 = 0.1;
@@ -71,9 +71,14 @@ fn restitution<S: Space>(e: f64) -> f64 {
     // Storage indices may change (grains are re-sorted by cell): find the grains by id.
     let (a, b) = (st.grains.index_of(0).unwrap(), st.grains.index_of(1).unwrap());
     let gap = (st.grains.x[b] - st.grains.x[a]).length() - 2.0 * RADIUS;
-    assert!(gap > 0.0, "the grains must have separated");
     let rebound = S::component(st.grains.v[b] - st.grains.v[a], 0);
-    rebound / (2.0 * v0)
+    (rebound / (2.0 * v0), gap)
+}
+
+fn restitution<S: Space>(e: f64) -> f64 {
+    let (e, gap) = impact::<S>(e);
+    assert!(gap > 0.0, "the grains must have separated");
+    e
 }
 
 #[test]
@@ -81,6 +86,18 @@ fn restitution_matches_target_for_head_on_impact_2d_and_3d() {
     for e in [0.1, 0.5, 0.9] {
         assert_close(restitution::<D2>(e), e, 0.01, &format!("2D restitution, e = {e}"));
         assert_close(restitution::<D3>(e), e, 0.01, &format!("3D restitution, e = {e}"));
+    }
+}
+
+/// e = 0 is critical damping (ζ = 1): the pair comes to rest in contact, without rebound;
+/// the overlap decays as (1 + ω t) e^{−ω t}, so it is not yet zero after the test's time.
+#[test]
+fn zero_restitution_stops_an_impact_without_rebound() {
+    let (e2, gap2) = impact::<D2>(0.0);
+    let (e3, gap3) = impact::<D3>(0.0);
+    for (e, gap) in [(e2, gap2), (e3, gap3)] {
+        assert!(e.abs() < 0.01, "rebound {e} of the approach speed");
+        assert!(gap <= 0.0 && gap > -0.01 * RADIUS, "gap {gap} m");
     }
 }
 

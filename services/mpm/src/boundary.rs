@@ -8,6 +8,12 @@
 //!   (Coulomb: the impulse that stops the normal motion bounds the tangential one), to zero at most.
 //!
 //! Separating nodes are left free except on sticky walls.
+//!
+//! A segment (2D) is one-sided on the grid: material stays on its left (the side of the
+//! normal from → to turned counter-clockwise), and nodes on it or up to `thickness` behind it
+//! are in the wall. Grains see both sides (the DEM); the continuum only needs the side it
+//! fills, and a wall of one node row would let points leak through between the rows.
+//! A drum keeps material inside its circle; its surface moves at the spin's velocity.
 
 use grains_grid::{Space, Vector};
 
@@ -24,6 +30,11 @@ pub enum Geometry<S: Space> {
     Plane { point: S::V, normal: S::V },
     /// Material kept inside the box.
     Box { min: S::V, max: S::V },
+    /// 2D thin wall from `from` to `to`, material on its left; nodes up to `thickness` behind.
+    Segment { from: S::V, to: S::V, thickness: f64 },
+    /// Material kept inside the circle (2D) or the cylinder along z (3D), turning at `spin`
+    /// [rad/s] about z, counter-clockwise positive.
+    Drum { center: S::V, radius: f64, spin: f64 },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,6 +83,31 @@ impl<S: Space> Wall<S> {
                     v = correct::<S>(self.contact, v, self.velocity, S::from_array(n));
                 }
                 v
+            }
+            Geometry::Segment { from, to, thickness } => {
+                let (a, b, p) = (S::to_array(from), S::to_array(to), S::to_array(x));
+                let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
+                let len = tx.hypot(ty);
+                let along = ((p[0] - a[0]) * tx + (p[1] - a[1]) * ty) / len;
+                // Left normal; `ahead` is the signed distance in front of the segment.
+                let (nx, ny) = (-ty / len, tx / len);
+                let ahead = (p[0] - a[0]) * nx + (p[1] - a[1]) * ny;
+                if (0.0..=len).contains(&along) && ahead <= 0.0 && ahead >= -thickness {
+                    correct::<S>(self.contact, v, self.velocity, S::from_array([nx, ny, 0.0]))
+                } else {
+                    v
+                }
+            }
+            Geometry::Drum { center, radius, spin } => {
+                let (c, p) = (S::to_array(center), S::to_array(x));
+                let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+                let r = dx.hypot(dy);
+                if r < radius || r == 0.0 {
+                    return v;
+                }
+                // The drum's surface at the node's angle moves at ω ẑ × (x − c).
+                let u = self.velocity + S::from_array([-spin * dy * radius / r, spin * dx * radius / r, 0.0]);
+                correct::<S>(self.contact, v, u, S::from_array([-dx / r, -dy / r, 0.0]))
             }
         }
     }
@@ -147,6 +183,70 @@ mod tests {
             id: 0,
         };
         assert_eq!(b.apply(DVec2::new(1.0, 0.5), DVec2::new(2.0, 1.0), 0.0), DVec2::new(0.0, 1.0));
+    }
+
+    #[test]
+    fn a_segment_holds_material_on_its_left_and_lets_it_pass_beside() {
+        // A silo bottom from x = 0 to 1 at y = 0 (left normal +y), two cells of 0.1 thick.
+        let bottom = Wall::<D2> {
+            geometry: Geometry::Segment {
+                from: DVec2::ZERO,
+                to: DVec2::X,
+                thickness: 0.2,
+            },
+            contact: Contact::Slip,
+            velocity: DVec2::ZERO,
+            shift: DVec2::ZERO,
+            id: 0,
+        };
+        let down = DVec2::new(1.0, -2.0);
+        // On the segment and behind it within its thickness: the fall is stopped.
+        assert_eq!(bottom.apply(DVec2::new(0.5, 0.0), down, 0.0), DVec2::new(1.0, 0.0));
+        assert_eq!(bottom.apply(DVec2::new(0.5, -0.15), down, 0.0), DVec2::new(1.0, 0.0));
+        // In front of it, beyond its thickness, or past its end (the orifice): free.
+        assert_eq!(bottom.apply(DVec2::new(0.5, 0.05), down, 0.0), down);
+        assert_eq!(bottom.apply(DVec2::new(0.5, -0.25), down, 0.0), down);
+        assert_eq!(bottom.apply(DVec2::new(1.05, 0.0), down, 0.0), down);
+        // Reversed, its left is −y: material below is held up there, material above is not.
+        let mut roof = bottom;
+        roof.geometry = Geometry::Segment {
+            from: DVec2::X,
+            to: DVec2::ZERO,
+            thickness: 0.2,
+        };
+        assert_eq!(roof.apply(DVec2::new(0.5, 0.1), -down, 0.0), DVec2::new(-1.0, 0.0));
+        assert_eq!(roof.apply(DVec2::new(0.5, 0.0), down, 0.0), down);
+    }
+
+    #[test]
+    fn a_spinning_drum_drags_what_presses_on_it() {
+        // Radius 1 about the origin, 2 rad/s counter-clockwise: its bottom moves at +2 m/s in x.
+        let drum = |contact| Wall::<D2> {
+            geometry: Geometry::Drum {
+                center: DVec2::ZERO,
+                radius: 1.0,
+                spin: 2.0,
+            },
+            contact,
+            velocity: DVec2::ZERO,
+            shift: DVec2::ZERO,
+            id: 0,
+        };
+        let bottom = DVec2::new(0.0, -1.0);
+        // Resting on the bottom and pressing in: a rough drum takes it along at +2 m/s.
+        assert_eq!(
+            drum(Contact::Sticky).apply(bottom, DVec2::new(0.0, -0.1), 0.0),
+            DVec2::new(2.0, 0.0)
+        );
+        // Frictional: 2 m/s of slip, μ |v_n| = 0.5 × 1 = 0.5 of it taken away.
+        let v = drum(Contact::Friction(0.5)).apply(DVec2::new(0.0, -1.01), DVec2::new(0.0, -1.0), 0.0);
+        assert!((v - DVec2::new(0.5, 0.0)).length() < 1e-12, "{v}");
+        // Inside: free; moving away from the surface: free.
+        assert_eq!(
+            drum(Contact::Slip).apply(DVec2::new(0.0, -0.9), DVec2::new(0.0, -1.0), 0.0),
+            DVec2::new(0.0, -1.0)
+        );
+        assert_eq!(drum(Contact::Slip).apply(bottom, DVec2::new(0.0, 1.0), 0.0), DVec2::new(0.0, 1.0));
     }
 
     #[test]

@@ -126,20 +126,16 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     Ok(())
 }
 
-/// Whether both solvers of this run can carry out a `snapshot` or `set` command (a wall both
-/// solvers have: plane or box).
+/// Whether both solvers of this run can carry out a `snapshot` or `set` command (both have
+/// every scene wall).
 fn accepts(scene: &Scene, c: &Control) -> bool {
-    use grains_protocol::scene::WallShape;
     match Command::from_code(c.command) {
         Some(Command::Snapshot) => true,
         Some(Command::Set) => Param::from_code(c.key).is_some_and(|p| {
             let (lo, hi, _) = p.range();
             let exists = match p {
                 Param::Gravity { .. } => true,
-                Param::WallVelocity { wall, .. } => scene
-                    .walls
-                    .get(wall)
-                    .is_some_and(|w| matches!(w.shape, WallShape::Plane { .. } | WallShape::Box { .. })),
+                Param::WallVelocity { wall, .. } => wall < scene.walls.len(),
             };
             (lo..=hi).contains(&c.value) && exists && set_component([0.0; 3], scene.dim(), p, c.value).is_ok()
         }),

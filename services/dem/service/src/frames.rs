@@ -1,5 +1,6 @@
 //! VTU frames of the grains (ParaView: open `frames/grains.pvd`, glyph by `radius`), with point
-//! data id, radius, velocity, angular_velocity and contacts.
+//! data id, radius, mass (the grain's share in a hybrid band: m (1 − w)), velocity,
+//! angular_velocity and contacts.
 
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::Space;
@@ -19,6 +20,7 @@ impl FrameWriter {
         let x: Vec<[f64; 3]> = g.x.iter().map(|&x| S::to_array(x)).collect();
         let v: Vec<f64> = g.v.iter().flat_map(|&v| S::to_array(v)).collect();
         let w: Vec<f64> = g.omega.iter().flat_map(|&w| S::ang_array(w)).collect();
+        let mass: Vec<f64> = g.mass.iter().zip(&g.scale).map(|(m, s)| m * s).collect();
         let contacts: Vec<i32> = (0..g.len())
             .map(|i| pipeline.forces.get(i).map_or(0, |f| f.contacts as i32))
             .collect();
@@ -32,6 +34,11 @@ impl FrameWriter {
                 name: "radius",
                 components: 1,
                 values: Values::F64(&g.radius),
+            },
+            Field {
+                name: "mass",
+                components: 1,
+                values: Values::F64(&mass),
             },
             Field {
                 name: "velocity",

@@ -51,16 +51,16 @@ fn bulk_density(material: &Material) -> f64 {
     material.density * material.mpm.as_ref().map_or(1.0, |m| m.packing)
 }
 
-/// What the MPM needs of a scene before anything runs: one material, plane or box walls, and
+/// What the MPM needs of a scene before anything runs: one material, no segment walls in 3D, and
 /// the time step under the CFL limit h / c of the elastic wave speed c = √(M / ρ). Errors name
 /// the scene field.
 pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     let (_, material) = mpm_material(scene).map_err(|e| ("body".to_string(), e))?;
     for (k, w) in scene.walls.iter().enumerate() {
-        if matches!(w.shape, WallShape::Drum { .. } | WallShape::Segment { .. }) {
+        if matches!(w.shape, WallShape::Segment { .. }) && scene.dim() == 3 {
             return Err((
                 format!("wall[{k}].kind"),
-                "MPM walls are \"plane\" or \"box\" in this version (drum and segment walls act on grains only)".into(),
+                "an MPM segment wall is 2D only (a thin rod holds no continuum in 3D): use a \"plane\" or \"box\"".into(),
             ));
         }
     }
@@ -106,6 +106,10 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     }
     Ok(())
 }
+
+/// How far behind a segment, in cells, grid nodes belong to it: a GIMP point's support reaches
+/// 1.5 cells, so two cells keep a point in front from weighing free nodes behind.
+const SEGMENT_CELLS: f64 = 2.0;
 
 fn vec<S: Space>(a: [f64; 3]) -> S::V {
     S::from_array(a)
@@ -156,7 +160,7 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
         .walls
         .iter()
         .enumerate()
-        .filter_map(|(id, w)| {
+        .map(|(id, w)| {
             let geometry = match w.shape {
                 WallShape::Plane { point, normal } => Geometry::Plane {
                     point: vec::<S>(point),
@@ -166,7 +170,16 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
                     min: vec::<S>(min),
                     max: vec::<S>(max),
                 },
-                WallShape::Drum { .. } | WallShape::Segment { .. } => return None,
+                WallShape::Segment { from, to } => Geometry::Segment {
+                    from: vec::<S>(from),
+                    to: vec::<S>(to),
+                    thickness: SEGMENT_CELLS * h,
+                },
+                WallShape::Drum { center, radius } => Geometry::Drum {
+                    center: vec::<S>(center),
+                    radius,
+                    spin: w.spin,
+                },
             };
             let contact = if w.sticky {
                 Contact::Sticky
@@ -175,13 +188,13 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             } else {
                 Contact::Slip
             };
-            Some(Wall {
+            Wall {
                 geometry,
                 contact,
                 velocity: vec::<S>(w.velocity),
                 shift: S::V::default(),
                 id,
-            })
+            }
         })
         .collect();
     let params = MpmParams {

@@ -66,6 +66,8 @@ impl<S: MpmSpace> MpmSolver<S> {
         let model = &self.params.model;
         let x: Vec<[f64; 3]> = p.x.iter().map(|&x| S::to_array(x)).collect();
         let v: Vec<f64> = p.v.iter().flat_map(|&v| S::to_array(v)).collect();
+        // The mass a point carries in the mixture: m w in a hybrid band.
+        let mass: Vec<f64> = p.mass.iter().zip(&p.weight).map(|(m, w)| m * w).collect();
         let pressure: Vec<f64> = (0..p.len()).map(|k| Model::pressure(&p.tau[k], p.jacobian[k])).collect();
         let packing: Vec<f64> = (0..p.len()).map(|k| model.packing(p.packing[k], p.jacobian[k])).collect();
         let fields = [
@@ -73,6 +75,11 @@ impl<S: MpmSpace> MpmSolver<S> {
                 name: "id",
                 components: 1,
                 values: Values::U64(&p.id),
+            },
+            Field {
+                name: "mass",
+                components: 1,
+                values: Values::F64(&mass),
             },
             Field {
                 name: "velocity",
@@ -236,12 +243,12 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             }
             (Some(Command::Set), Some(p @ Param::WallVelocity { wall, .. })) => {
                 let time = self.pipeline.time;
-                let w = self.params.walls.iter_mut().find(|w| w.id == wall).ok_or_else(|| {
-                    format!(
-                        "{}: the MPM has no wall {wall} (drum and segment walls act on grains only)",
-                        p.name()
-                    )
-                })?;
+                let w = self
+                    .params
+                    .walls
+                    .iter_mut()
+                    .find(|w| w.id == wall)
+                    .ok_or_else(|| format!("{}: the MPM has no wall {wall}", p.name()))?;
                 let v = set_component(S::to_array(w.velocity), S::DIM, p, c.value)?;
                 w.set_velocity(S::from_array(v), time);
                 Ok(())
