@@ -20,7 +20,8 @@ pub enum Layer {
 }
 
 /// Whether the face of a box body on `axis` (the low face when `low`) at coordinate `at` rests
-/// on a plane or box wall, or on the domain's own wall layers (within one cell).
+/// on a plane or box wall, on a segment lying in it (a silo bottom, orifice included), or on
+/// the domain's own wall layers (within one cell).
 fn supported(scene: &Scene, axis: usize, low: bool, at: f64) -> bool {
     let h = scene.domain.cell_size;
     let near = |c: f64| (c - at).abs() <= h;
@@ -34,7 +35,8 @@ fn supported(scene: &Scene, axis: usize, low: bool, at: f64) -> bool {
             inward > 0.99 && near(point[axis])
         }
         WallShape::Box { min, max } => near(if low { min[axis] } else { max[axis] }),
-        WallShape::Drum { .. } | WallShape::Segment { .. } => false,
+        WallShape::Segment { from, to } => near(from[axis]) && near(to[axis]),
+        WallShape::Drum { .. } => false,
     })
 }
 

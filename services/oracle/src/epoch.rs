@@ -112,6 +112,8 @@ pub struct Plan {
     /// Existing points whose mass and volume are multiplied by a factor (id, factor): in a
     /// cell whose models changed, so that its mass stays what it was.
     pub scale_points: Vec<(u64, f64)>,
+    /// Mass the per-cell rules could not place [kg]: the epoch's total changes by minus it.
+    pub unplaced: f64,
 }
 
 /// The cell (index into the zone arrays) of a position, if on the grid.
@@ -200,14 +202,43 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
     let lacks_grains = |c: usize| point_mass[c] > 0.0 && grain_mass[c] < 0.5 * point_mass[c];
     let lacks_points = |c: usize| grain_mass[c] > 0.0 && point_mass[c] < 0.5 * grain_mass[c];
     let is_solid = |c: usize| solid.get(c).copied().unwrap_or(false);
+    // A cell behind a wall reads dense, so its own distance says nothing; the material that
+    // strays into it (points resting a little behind a floor or a silo bottom) takes the zone
+    // of the deepest open cell next to it. Cells with no open neighbour keep their zone.
+    let ijk = |c: usize| [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
+    let open_distance = |c: usize| -> Option<f64> {
+        if !is_solid(c) {
+            return Some(distance[c]);
+        }
+        let at = ijk(c);
+        let span = |k: usize| if k < dim { -1i64..=1 } else { 0..=0 };
+        let mut deepest: Option<f64> = None;
+        for dz in span(2) {
+            for dy in span(1) {
+                for dx in span(0) {
+                    let q = [at[0] as i64 + dx, at[1] as i64 + dy, at[2] as i64 + dz];
+                    if (0..3).any(|k| q[k] < 0 || q[k] >= n[k] as i64) {
+                        continue;
+                    }
+                    let q = linear(n, q.map(|v| v as usize));
+                    if !is_solid(q) {
+                        deepest = Some(deepest.map_or(distance[q], |d| d.max(distance[q])));
+                    }
+                }
+            }
+        }
+        deepest
+    };
     let zones: Vec<Zone> = (0..count)
-        .map(|c| match (previous[c], zone_of_distance(distance[c], s.centre, s.half_width)) {
-            (z, _) if is_solid(c) => z,
-            (Zone::Continuum, Zone::Discrete) | (Zone::Discrete, Zone::Continuum) => Zone::Hybrid,
-            (_, Zone::Discrete) if lacks_grains(c) => Zone::Hybrid,
-            (_, Zone::Continuum) if lacks_points(c) => Zone::Hybrid,
-            (_, z) => z,
-        })
+        .map(
+            |c| match (previous[c], open_distance(c).map(|d| zone_of_distance(d, s.centre, s.half_width))) {
+                (z, None) => z,
+                (Zone::Continuum, Some(Zone::Discrete)) | (Zone::Discrete, Some(Zone::Continuum)) => Zone::Hybrid,
+                (_, Some(Zone::Discrete)) if lacks_grains(c) => Zone::Hybrid,
+                (_, Some(Zone::Continuum)) if lacks_points(c) => Zone::Hybrid,
+                (_, Some(z)) => z,
+            },
+        )
         .collect();
     let zone_at = |x: [f64; 3]| cell_of(cells, dim, x).map_or(Zone::Discrete, |c| zones[c]);
     let delete_grains: Vec<u64> = grains
@@ -355,7 +386,7 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
             });
         }
     }
-    let scale_points = conserve_mass(
+    let (scale_points, unplaced) = conserve_mass(
         cells,
         dim,
         &zones,
@@ -375,6 +406,7 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
         new_grains,
         new_points,
         scale_points,
+        unplaced,
     }
 }
 
@@ -398,7 +430,7 @@ fn conserve_mass(
     new_grains: &[NewGrain],
     new_points: &mut [NewPoint],
     s: &Settings,
-) -> Vec<(u64, f64)> {
+) -> (Vec<(u64, f64)>, f64) {
     let count = zones.len();
     let gone_g: BTreeSet<u64> = delete_grains.iter().copied().collect();
     let gone_p: BTreeSet<u64> = delete_points.iter().copied().collect();
@@ -492,14 +524,16 @@ fn conserve_mass(
             p.volume *= factor[c];
         }
     }
-    points
+    let unplaced = (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).sum();
+    let scale = points
         .iter()
         .filter(|p| !gone_p.contains(&p.id))
         .filter_map(|p| {
             let f = factor[cell_of(cells, dim, p.x)?];
             (f != 1.0).then_some((p.id, f))
         })
-        .collect()
+        .collect();
+    (scale, unplaced)
 }
 
 /// Area of a disk (2D, per metre of thickness) or volume of a sphere (3D) of radius `r`.

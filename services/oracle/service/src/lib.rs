@@ -236,7 +236,7 @@ impl OracleState {
         self.next_ids = (self.next_ids.0.max(max_id(grains)), self.next_ids.1.max(max_id(points)));
         let (nodes, kernel) = grains_service::grid::scene_grid(scene);
         let cells = self.cells;
-        let solid = solid_cells(scene, &cells, time);
+        let solid = solid_cells(scene, &cells, time, self.settings.centre + self.settings.half_width);
         let clearance = |x: [f64; 3]| wall_clearance(scene, x, time);
         let input = epoch::Inputs {
             nodes: &nodes,
@@ -414,7 +414,7 @@ impl<T: Transport> Epochs<T> {
 /// letters per cell row, top first, D/H/C (lower case behind a wall), and what changes.
 fn zone_map(cells: &grains_grid::Grid, plan: &epoch::Plan, solid: &[bool], time: f64) -> String {
     let n0 = cells.nodes[0] as usize;
-    let mut out = format!("grains-oracle: epoch at t = {time:.6} s\n");
+    let mut out = format!("grains-oracle: epoch at t = {time:.6} s, unplaced mass {:.3e} kg\n", plan.unplaced);
     for j in (0..cells.nodes[1] as usize).rev() {
         let row: String = (j * n0..(j + 1) * n0)
             .map(|c| {
@@ -441,7 +441,7 @@ fn zone_map(cells: &grains_grid::Grid, plan: &epoch::Plan, solid: &[bool], time:
 }
 
 /// Distance from `x` to the nearest wall at `time` (walls translate at their scene velocity),
-/// negative behind one.
+/// negative behind one (behind a 2D segment: on its right, see the MPM's segment).
 pub fn wall_clearance(scene: &Scene, x: [f64; 3], time: f64) -> f64 {
     let dim = scene.dim();
     let dot = |a: [f64; 3], b: [f64; 3]| (0..dim).map(|k| a[k] * b[k]).sum::<f64>();
@@ -467,8 +467,17 @@ pub fn wall_clearance(scene: &Scene, x: [f64; 3], time: f64) -> f64 {
                     let (a, b) = (at(from), at(to));
                     let ab: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
                     let ax: [f64; 3] = std::array::from_fn(|k| x[k] - a[k]);
-                    let t = (dot(ax, ab) / dot(ab, ab).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
-                    (0..dim).map(|k| (ax[k] - t * ab[k]).powi(2)).sum::<f64>().sqrt()
+                    let along = dot(ax, ab) / dot(ab, ab).max(f64::MIN_POSITIVE);
+                    let t = along.clamp(0.0, 1.0);
+                    let distance = (0..dim).map(|k| (ax[k] - t * ab[k]).powi(2)).sum::<f64>().sqrt();
+                    // Behind a 2D segment (its right, across from the continuum's side) is
+                    // behind a wall: no new grains there (they would land in a silo's bin).
+                    let ahead = ax[0] * -ab[1] + ax[1] * ab[0];
+                    if dim == 2 && (0.0..=1.0).contains(&along) && ahead < 0.0 {
+                        -distance
+                    } else {
+                        distance
+                    }
                 }
             }
         })
@@ -476,8 +485,12 @@ pub fn wall_clearance(scene: &Scene, x: [f64; 3], time: f64) -> f64 {
 }
 
 /// The cells whose centre lies behind a wall at `time` (walls translate at their scene
-/// velocity): behind a plane, outside a box or a drum. Segments are thin: none.
-pub fn solid_cells(scene: &Scene, cells: &grains_grid::Grid, time: f64) -> Vec<bool> {
+/// velocity): behind a plane, outside a box or a drum, or up to `behind` plus a cell behind a
+/// segment (its back, the side opposite the continuum's: see the MPM's segment). The space
+/// behind a segment is open (a silo's bin), but it must not read as a free surface for the
+/// material resting on the segment: `behind` is the depth of the oracle's band, so that only
+/// the orifice, past the segment's end, is one.
+pub fn solid_cells(scene: &Scene, cells: &grains_grid::Grid, time: f64, behind: f64) -> Vec<bool> {
     let dim = scene.dim();
     let n = [0, 1, 2].map(|k| if k < dim { cells.nodes[k] as usize } else { 1 });
     let mut out = vec![false; n.iter().product()];
@@ -505,7 +518,14 @@ pub fn solid_cells(scene: &Scene, cells: &grains_grid::Grid, time: f64) -> Vec<b
                     let c = at(center);
                     (0..2).map(|k| (x[k] - c[k]).powi(2)).sum::<f64>() > radius * radius
                 }
-                grains_protocol::scene::WallShape::Segment { .. } => false,
+                grains_protocol::scene::WallShape::Segment { from, to } => {
+                    let (a, b) = (at(from), at(to));
+                    let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
+                    let len = tx.hypot(ty);
+                    let along = ((x[0] - a[0]) * tx + (x[1] - a[1]) * ty) / len;
+                    let ahead = ((x[0] - a[0]) * -ty + (x[1] - a[1]) * tx) / len;
+                    dim == 2 && (0.0..=len).contains(&along) && ahead < 0.0 && ahead >= -(behind + cells.h)
+                }
             }
         });
     }
