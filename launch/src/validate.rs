@@ -32,12 +32,12 @@ use anyhow::{Context, bail};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-fn load_with(path: &Path, overrides: &[String]) -> anyhow::Result<grains_protocol::scene::Scene> {
+pub(crate) fn load_with(path: &Path, overrides: &[String]) -> anyhow::Result<grains_protocol::scene::Scene> {
     Ok(grains_protocol::scene::load_with_overrides(path, overrides)?.0)
 }
 
 /// One run of `scene` with `overrides` as processes, quietly, under `<out>/runs`.
-fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyhow::Result<crate::run::RunOutcome> {
+pub(crate) fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyhow::Result<crate::run::RunOutcome> {
     run(&RunOptions {
         bridge: None,
         scene_path: scene.to_path_buf(),
@@ -51,13 +51,13 @@ fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyho
 }
 
 /// The rows of a run's `metrics.csv` (empty when it has none).
-struct Table {
+pub(crate) struct Table {
     header: Vec<String>,
-    rows: Vec<Vec<f64>>,
+    pub(crate) rows: Vec<Vec<f64>>,
 }
 
 impl Table {
-    fn read(run_dir: &Path) -> Table {
+    pub(crate) fn read(run_dir: &Path) -> Table {
         let csv = std::fs::read_to_string(run_dir.join("metrics.csv")).unwrap_or_default();
         let mut lines = csv.lines();
         let header = lines.next().unwrap_or_default().split(',').map(String::from).collect();
@@ -68,7 +68,7 @@ impl Table {
     }
 
     /// Column `name` of `row` (0 when the column is missing).
-    fn get(&self, row: &[f64], name: &str) -> f64 {
+    pub(crate) fn get(&self, row: &[f64], name: &str) -> f64 {
         self.header
             .iter()
             .position(|c| c == name)
@@ -80,7 +80,7 @@ impl Table {
         self.rows.first().map_or(f64::NAN, |r| self.get(r, name))
     }
 
-    fn last(&self, name: &str) -> f64 {
+    pub(crate) fn last(&self, name: &str) -> f64 {
         self.rows.last().map_or(f64::NAN, |r| self.get(r, name))
     }
 }
@@ -113,6 +113,10 @@ pub struct ValidateArgs {
     /// runouts averaged over them. Default 3, `--quick` 1.
     #[arg(long)]
     pub packings: Option<u64>,
+    /// Parts to run: `column` (the collapse, `report.md`), `silo` (discharge, Beverloo,
+    /// clogging, bouncing: `silo.md`). Default both.
+    #[arg(long, value_delimiter = ',')]
+    pub part: Vec<String>,
 }
 
 /// Column width L₀ and bottom of both scenes [m].
@@ -178,8 +182,26 @@ pub fn front(profile: &[f64], bin: f64, min: f64) -> f64 {
 type Frame = (Vec<[f64; 3]>, Option<Vec<f64>>);
 
 fn read_vtu(path: &Path) -> anyhow::Result<Frame> {
+    let a = frame_arrays(path, &["radius"])?;
+    let radius = a.get("radius").cloned();
+    Ok((a.x, radius))
+}
+
+/// The named arrays of a VTU frame, with its positions.
+pub(crate) struct Arrays {
+    pub x: Vec<[f64; 3]>,
+    named: Vec<(String, Vec<f64>)>,
+}
+
+impl Arrays {
+    pub fn get(&self, name: &str) -> Option<&Vec<f64>> {
+        self.named.iter().find(|(n, _)| n == name).map(|(_, v)| v)
+    }
+}
+
+/// Positions and the arrays `names` (those present) of an ASCII VTU frame.
+pub(crate) fn frame_arrays(path: &Path, names: &[&str]) -> anyhow::Result<Arrays> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    // The values of the first data array at or after `start`.
     let array = |start: &str| -> Option<Vec<f64>> {
         let at = text.find(start)?;
         let body = &text[at + text[at..].find("<DataArray")?..];
@@ -188,8 +210,32 @@ fn read_vtu(path: &Path) -> anyhow::Result<Frame> {
         body[open..close].split_ascii_whitespace().map(|v| v.parse().ok()).collect()
     };
     let flat = array("<Points>").with_context(|| format!("{}: no points", path.display()))?;
-    let x = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    Ok((x, array("<DataArray type=\"Float64\" Name=\"radius\"")))
+    let named = names
+        .iter()
+        .filter_map(|n| array(&format!("<DataArray type=\"Float64\" Name=\"{n}\"")).map(|v| (n.to_string(), v)))
+        .collect();
+    Ok(Arrays {
+        x: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        named,
+    })
+}
+
+/// Every frame listed in `frames/<name>.pvd` of a run: (time, file), in order; none without one.
+pub(crate) fn frames_of(run_dir: &Path, name: &str) -> anyhow::Result<Vec<(f64, PathBuf)>> {
+    let Ok(pvd) = std::fs::read_to_string(run_dir.join("frames").join(format!("{name}.pvd"))) else {
+        return Ok(Vec::new());
+    };
+    pvd.split("<DataSet")
+        .skip(1)
+        .map(|d| {
+            let field = |key: &str| -> Option<&str> { d.split(&format!("{key}=\"")).nth(1)?.split('"').next() };
+            let t: f64 = field("timestep")
+                .and_then(|t| t.parse().ok())
+                .with_context(|| format!("{name}.pvd: a data set without timestep"))?;
+            let file = field("file").with_context(|| format!("{name}.pvd: a data set without file"))?;
+            Ok((t, run_dir.join("frames").join(file)))
+        })
+        .collect()
 }
 
 /// The last frame listed in `frames/<name>.pvd` of a run, if any.
@@ -441,6 +487,21 @@ impl Summary {
 }
 
 pub fn validate(args: &ValidateArgs) -> anyhow::Result<bool> {
+    if let Some(p) = args.part.iter().find(|p| !["column", "silo"].contains(&p.as_str())) {
+        bail!(crate::run::BadInput(format!("--part {p:?}: the parts are \"column\" and \"silo\"")));
+    }
+    let wants = |p: &str| args.part.is_empty() || args.part.iter().any(|q| q == p);
+    let column = if wants("column") { validate_column(args)? } else { true };
+    let silo = if wants("silo") {
+        crate::validate_silo::validate_silo(args)?
+    } else {
+        true
+    };
+    Ok(column && silo)
+}
+
+/// The column part: `report.md` and its data; whether every check passed.
+fn validate_column(args: &ValidateArgs) -> anyhow::Result<bool> {
     let ks = match (args.sweep_k.is_empty(), args.quick) {
         (false, _) => args.sweep_k.clone(),
         (true, true) => Vec::new(),

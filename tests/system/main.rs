@@ -816,7 +816,7 @@ fn validate_quick_hybrid_runout_is_within_10_percent_of_dem() {
     let _machine = machine();
     let out = out_dir("validate");
     // About three minutes on the CI machine (a packing, a DEM and a hybrid run); generous limit.
-    let mut r = Running::grains(&["validate", "--quick", "--out", out.to_str().unwrap()]);
+    let mut r = Running::grains(&["validate", "--quick", "--part", "column", "--out", out.to_str().unwrap()]);
     let status = r.wait_exit(Duration::from_secs(900));
     let err = r.stderr();
     let report = std::fs::read_to_string(out.join("report.md")).unwrap_or_default();
