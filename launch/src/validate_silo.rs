@@ -254,10 +254,9 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
     writeln!(md, "# Silo discharge: DEM, hybrid (adaptive zones), MPM\n")?;
     writeln!(
         md,
-        "Scene `{SCENE}` ({} grains of the packing in a 40 mm silo; the hybrid's zones move every {} steps). \
+        "Scene `{SCENE}` (a 40 mm silo filled to 60 mm from one poured packing; the hybrid's zones move every {} steps). \
          Discharge rate W = slope of the mass below the bottom over t in [{}, {}] s. Reference: the pure DEM run \
          of the same packing (issue 6: hybrid within {:.0}%).\n",
-        "~2,400",
         scene.oracle.as_ref().map_or(0, |o| o.every),
         WINDOW.0,
         WINDOW.1,
