@@ -13,6 +13,7 @@ pub mod pack;
 pub mod participants;
 pub mod run;
 pub mod validate;
+pub mod validate_drum;
 pub mod validate_silo;
 
 /// Exit code for an error of `grains`: 2 for bad input (scene, flags), 1 otherwise.

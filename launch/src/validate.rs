@@ -114,7 +114,8 @@ pub struct ValidateArgs {
     #[arg(long)]
     pub packings: Option<u64>,
     /// Parts to run: `column` (the collapse, `report.md`), `silo` (discharge, Beverloo,
-    /// clogging, bouncing: `silo.md`). Default both.
+    /// clogging, bouncing: `silo.md`), `drum` (angle of repose: `drum.md`). Default all
+    /// (`--quick`: column and silo).
     #[arg(long, value_delimiter = ',')]
     pub part: Vec<String>,
 }

@@ -11,8 +11,9 @@
 //!
 //! A segment (2D) is one-sided on the grid: material stays on its left (the side of the
 //! normal from → to turned counter-clockwise), and nodes on it or up to `thickness` behind it
-//! are in the wall. Grains see both sides (the DEM); the continuum only needs the side it
-//! fills, and a wall of one node row would let points leak through between the rows.
+//! are in the wall (between its ends: a node level with an end is in the opening). Grains
+//! see both sides (the DEM); the continuum only needs the side it fills, and a wall of one
+//! node row would let points leak through between the rows.
 //! A drum keeps material inside its circle; its surface moves at the spin's velocity.
 
 use grains_grid::{Space, Vector};
@@ -56,6 +57,31 @@ impl<S: Space> Wall<S> {
         self.velocity = velocity;
     }
 
+    /// Whether `x` lies behind the wall at time `t` (where no material is seeded): behind a
+    /// plane, outside a box or a drum, within a segment's thickness behind it.
+    pub fn behind(&self, x: S::V, t: f64) -> bool {
+        let x = x - self.shift - self.velocity * t;
+        match self.geometry {
+            Geometry::Plane { point, normal } => (x - point).dot(normal) < 0.0,
+            Geometry::Box { min, max } => {
+                let (xa, lo, hi) = (S::to_array(x), S::to_array(min), S::to_array(max));
+                (0..S::DIM).any(|k| xa[k] < lo[k] || xa[k] > hi[k])
+            }
+            Geometry::Segment { from, to, thickness } => {
+                let (a, b, p) = (S::to_array(from), S::to_array(to), S::to_array(x));
+                let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
+                let len = tx.hypot(ty);
+                let along = ((p[0] - a[0]) * tx + (p[1] - a[1]) * ty) / len;
+                let ahead = ((p[0] - a[0]) * -ty + (p[1] - a[1]) * tx) / len;
+                along > 0.0 && along < len && ahead < 0.0 && ahead >= -thickness
+            }
+            Geometry::Drum { center, radius, .. } => {
+                let (c, p) = (S::to_array(center), S::to_array(x));
+                (p[0] - c[0]).hypot(p[1] - c[1]) > radius
+            }
+        }
+    }
+
     /// The corrected velocity of a node at `x` with velocity `v` at time `t`.
     #[inline]
     pub fn apply(&self, x: S::V, v: S::V, t: f64) -> S::V {
@@ -92,7 +118,9 @@ impl<S: Space> Wall<S> {
                 // Left normal; `ahead` is the signed distance in front of the segment.
                 let (nx, ny) = (-ty / len, tx / len);
                 let ahead = (p[0] - a[0]) * nx + (p[1] - a[1]) * ny;
-                if (0.0..=len).contains(&along) && ahead <= 0.0 && ahead >= -thickness {
+                // Open ends: a node level with an end is in the opening (an orifice between two
+                // segments ending on nodes keeps its width on the grid, not one cell less).
+                if along > 0.0 && along < len && ahead <= 0.0 && ahead >= -thickness {
                     correct::<S>(self.contact, v, self.velocity, S::from_array([nx, ny, 0.0]))
                 } else {
                     v
@@ -207,6 +235,7 @@ mod tests {
         assert_eq!(bottom.apply(DVec2::new(0.5, 0.05), down, 0.0), down);
         assert_eq!(bottom.apply(DVec2::new(0.5, -0.25), down, 0.0), down);
         assert_eq!(bottom.apply(DVec2::new(1.05, 0.0), down, 0.0), down);
+        assert_eq!(bottom.apply(DVec2::new(1.0, 0.0), down, 0.0), down, "its end is open");
         // Reversed, its left is −y: material below is held up there, material above is not.
         let mut roof = bottom;
         roof.geometry = Geometry::Segment {
@@ -241,6 +270,7 @@ mod tests {
         // Frictional: 2 m/s of slip, μ |v_n| = 0.5 × 1 = 0.5 of it taken away.
         let v = drum(Contact::Friction(0.5)).apply(DVec2::new(0.0, -1.01), DVec2::new(0.0, -1.0), 0.0);
         assert!((v - DVec2::new(0.5, 0.0)).length() < 1e-12, "{v}");
+        assert!(drum(Contact::Slip).behind(DVec2::new(0.8, 0.8), 0.0) && !drum(Contact::Slip).behind(bottom * 0.9, 0.0));
         // Inside: free; moving away from the surface: free.
         assert_eq!(
             drum(Contact::Slip).apply(DVec2::new(0.0, -0.9), DVec2::new(0.0, -1.0), 0.0),

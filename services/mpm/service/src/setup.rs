@@ -127,36 +127,7 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
     let volume = spacing.powi(dim as i32);
     let rho = bulk_density(material);
     let packing = material.mpm.as_ref().map_or(1.0, |m| m.packing);
-    let mut pts = Points::<S>::default();
-    for body in scene.bodies.iter().filter(|b| b.model != BodyModel::Dem) {
-        debug_assert_eq!(body.material, material_index);
-        let region = match body.shape {
-            Shape::Box { min, max } => Region::Box { min, max },
-            Shape::Ball { center, radius } => Region::Ball { center, radius },
-        };
-        let first = pts.len();
-        for x in seed::<S>(region, grid.origin, h, per_axis) {
-            // Hybrid bodies: points in the hybrid band (weight w) and below it only.
-            let weight = match body.model {
-                BodyModel::Hybrid => match zones.layer_at(S::to_array(x)) {
-                    Layer::Discrete => continue,
-                    Layer::Hybrid => scene.coupling.weight,
-                    Layer::Continuum => 1.0,
-                },
-                BodyModel::Mpm | BodyModel::Dem => 1.0,
-            };
-            pts.push(x, rho * volume, volume, packing);
-            *pts.weight.last_mut().expect("just pushed") = weight;
-            *pts.v.last_mut().expect("just pushed") = S::from_array(body.velocity);
-        }
-        if body.confining_pressure > 0.0
-            && let Shape::Box { min, max } = body.shape
-        {
-            let all = first..pts.len();
-            confine(&mut pts, all, min, max, spacing, body.confining_pressure);
-        }
-    }
-    let walls = scene
+    let walls: Vec<Wall<S>> = scene
         .walls
         .iter()
         .enumerate()
@@ -197,6 +168,39 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             }
         })
         .collect();
+    let mut pts = Points::<S>::default();
+    for body in scene.bodies.iter().filter(|b| b.model != BodyModel::Dem) {
+        debug_assert_eq!(body.material, material_index);
+        let region = match body.shape {
+            Shape::Box { min, max } => Region::Box { min, max },
+            Shape::Ball { center, radius } => Region::Ball { center, radius },
+        };
+        let first = pts.len();
+        // Points behind a wall (a box body cut by a drum's circle) are not seeded.
+        for x in seed::<S>(region, grid.origin, h, per_axis)
+            .into_iter()
+            .filter(|&x| !walls.iter().any(|w| w.behind(x, 0.0)))
+        {
+            // Hybrid bodies: points in the hybrid band (weight w) and below it only.
+            let weight = match body.model {
+                BodyModel::Hybrid => match zones.layer_at(S::to_array(x)) {
+                    Layer::Discrete => continue,
+                    Layer::Hybrid => scene.coupling.weight,
+                    Layer::Continuum => 1.0,
+                },
+                BodyModel::Mpm | BodyModel::Dem => 1.0,
+            };
+            pts.push(x, rho * volume, volume, packing);
+            *pts.weight.last_mut().expect("just pushed") = weight;
+            *pts.v.last_mut().expect("just pushed") = S::from_array(body.velocity);
+        }
+        if body.confining_pressure > 0.0
+            && let Shape::Box { min, max } = body.shape
+        {
+            let all = first..pts.len();
+            confine(&mut pts, all, min, max, spacing, body.confining_pressure);
+        }
+    }
     let params = MpmParams {
         grid,
         kernel,
