@@ -488,8 +488,10 @@ impl Summary {
 }
 
 pub fn validate(args: &ValidateArgs) -> anyhow::Result<bool> {
-    if let Some(p) = args.part.iter().find(|p| !["column", "silo"].contains(&p.as_str())) {
-        bail!(crate::run::BadInput(format!("--part {p:?}: the parts are \"column\" and \"silo\"")));
+    if let Some(p) = args.part.iter().find(|p| !["column", "silo", "drum"].contains(&p.as_str())) {
+        bail!(crate::run::BadInput(format!(
+            "--part {p:?}: the parts are \"column\", \"silo\" and \"drum\""
+        )));
     }
     let wants = |p: &str| args.part.is_empty() || args.part.iter().any(|q| q == p);
     let column = if wants("column") { validate_column(args)? } else { true };
@@ -498,7 +500,13 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<bool> {
     } else {
         true
     };
-    Ok(column && silo)
+    // The drum takes minutes more than the quick set allows: full runs only, or when asked.
+    let drum = if wants("drum") && (!args.quick || args.part.iter().any(|q| q == "drum")) {
+        crate::validate_drum::validate_drum(args)?
+    } else {
+        true
+    };
+    Ok(column && silo && drum)
 }
 
 /// The column part: `report.md` and its data; whether every check passed.

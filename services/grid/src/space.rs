@@ -263,3 +263,34 @@ mod tests {
         assert!((x - DVec3::Y).length() < 1e-6, "{x}");
     }
 }
+
+/// Where `p` lies relative to the 2D segment `a` → `b` (x and y of the arrays): `along` the
+/// segment from `a` [m] (inside it for 0 < along < `length`), `ahead` of it [m] (signed,
+/// positive on its left: the side of a → b turned counter-clockwise), and that left `normal`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SegmentFrame {
+    pub along: f64,
+    pub ahead: f64,
+    pub length: f64,
+    pub normal: [f64; 2],
+}
+
+pub fn segment_frame(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> SegmentFrame {
+    let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
+    let length = tx.hypot(ty);
+    let normal = [-ty / length, tx / length];
+    let (dx, dy) = (p[0] - a[0], p[1] - a[1]);
+    SegmentFrame {
+        along: (dx * tx + dy * ty) / length,
+        ahead: dx * normal[0] + dy * normal[1],
+        length,
+        normal,
+    }
+}
+
+impl SegmentFrame {
+    /// Between the segment's ends (the ends themselves excluded) and up to `depth` behind it.
+    pub fn behind_within(&self, depth: f64) -> bool {
+        self.along > 0.0 && self.along < self.length && self.ahead < 0.0 && self.ahead >= -depth
+    }
+}

@@ -16,6 +16,7 @@
 //! node row would let points leak through between the rows.
 //! A drum keeps material inside its circle; its surface moves at the spin's velocity.
 
+use grains_grid::space::segment_frame;
 use grains_grid::{Space, Vector};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,12 +69,7 @@ impl<S: Space> Wall<S> {
                 (0..S::DIM).any(|k| xa[k] < lo[k] || xa[k] > hi[k])
             }
             Geometry::Segment { from, to, thickness } => {
-                let (a, b, p) = (S::to_array(from), S::to_array(to), S::to_array(x));
-                let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
-                let len = tx.hypot(ty);
-                let along = ((p[0] - a[0]) * tx + (p[1] - a[1]) * ty) / len;
-                let ahead = ((p[0] - a[0]) * -ty + (p[1] - a[1]) * tx) / len;
-                along > 0.0 && along < len && ahead < 0.0 && ahead >= -thickness
+                segment_frame(S::to_array(from), S::to_array(to), S::to_array(x)).behind_within(thickness)
             }
             Geometry::Drum { center, radius, .. } => {
                 let (c, p) = (S::to_array(center), S::to_array(x));
@@ -111,17 +107,12 @@ impl<S: Space> Wall<S> {
                 v
             }
             Geometry::Segment { from, to, thickness } => {
-                let (a, b, p) = (S::to_array(from), S::to_array(to), S::to_array(x));
-                let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
-                let len = tx.hypot(ty);
-                let along = ((p[0] - a[0]) * tx + (p[1] - a[1]) * ty) / len;
-                // Left normal; `ahead` is the signed distance in front of the segment.
-                let (nx, ny) = (-ty / len, tx / len);
-                let ahead = (p[0] - a[0]) * nx + (p[1] - a[1]) * ny;
+                let f = segment_frame(S::to_array(from), S::to_array(to), S::to_array(x));
                 // Open ends: a node level with an end is in the opening (an orifice between two
-                // segments ending on nodes keeps its width on the grid, not one cell less).
-                if along > 0.0 && along < len && ahead <= 0.0 && ahead >= -thickness {
-                    correct::<S>(self.contact, v, self.velocity, S::from_array([nx, ny, 0.0]))
+                // segments ending on nodes keeps its width on the grid, not one cell less). A
+                // node on the segment (ahead = 0) is in it.
+                if f.ahead == 0.0 && f.along > 0.0 && f.along < f.length || f.behind_within(thickness) {
+                    correct::<S>(self.contact, v, self.velocity, S::from_array([f.normal[0], f.normal[1], 0.0]))
                 } else {
                     v
                 }

@@ -519,12 +519,7 @@ pub fn solid_cells(scene: &Scene, cells: &grains_grid::Grid, time: f64, behind: 
                     (0..2).map(|k| (x[k] - c[k]).powi(2)).sum::<f64>() > radius * radius
                 }
                 grains_protocol::scene::WallShape::Segment { from, to } => {
-                    let (a, b) = (at(from), at(to));
-                    let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
-                    let len = tx.hypot(ty);
-                    let along = ((x[0] - a[0]) * tx + (x[1] - a[1]) * ty) / len;
-                    let ahead = ((x[0] - a[0]) * -ty + (x[1] - a[1]) * tx) / len;
-                    dim == 2 && (0.0..=len).contains(&along) && ahead < 0.0 && ahead >= -(behind + cells.h)
+                    dim == 2 && grains_grid::space::segment_frame(at(from), at(to), x).behind_within(behind + cells.h)
                 }
             }
         });
