@@ -284,9 +284,22 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
             .collect();
         let spacing = cells.h / s.points_per_axis.max(1) as f64;
         let per_cell = (s.points_per_axis.max(1) as usize).pow(dim as u32);
+        // A cell's points so far: new ones fill the places left, up to the MPM's count per
+        // cell (seeding a full cell on top of them multiplied the points of a turning drum
+        // threefold in 2 s, each lighter than the last).
+        let mut existing: BTreeMap<usize, Vec<[f64; 3]>> = BTreeMap::new();
+        for p in points {
+            if let Some(c) = cell_of(cells, dim, p.x).filter(|c| need_points.binary_search(c).is_ok()) {
+                existing.entry(c).or_default().push(p.x);
+            }
+        }
         for &c in &need_points {
             let lo = cell_corner(cells, n, c);
-            let xs = poisson_in_cell(dim, lo, cells.h, per_cell, 0.75 * spacing, &|x| clearance(x) > 0.0, rng);
+            let there = existing.get(&c).map_or(&[][..], |v| &v[..]);
+            if there.len() >= per_cell {
+                continue;
+            }
+            let xs = poisson_in_cell(dim, lo, cells.h, there, per_cell, 0.75 * spacing, &|x| clearance(x) > 0.0, rng);
             if xs.is_empty() {
                 continue;
             }
@@ -415,9 +428,10 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
 /// is (a grain's mass is its size), the points take the rest (Yue 2018 Alg. 14 sets the
 /// points' mass per cell the same way). Factors are kept within [1/2, 2] per cell; what a
 /// cell cannot keep that way (and all of it in a cell turning discrete, which has no points)
-/// goes to the nearest cells with points, whose factors stay within [1/2, 2] too (the rest
-/// is lost, and shows in the epoch's mass before and after). New points take their cell's factor directly; the
-/// existing ones are listed.
+/// goes to the nearest cells with points, whose factors stay within [1/2, 2] too; what is
+/// left after that is spread over all the points (bounded to ±10%; beyond, it is lost and
+/// shows in the epoch's mass before and after). New points take their cell's factor
+/// directly; the existing ones are listed.
 #[allow(clippy::too_many_arguments)]
 fn conserve_mass(
     cells: &Grid,
@@ -524,7 +538,23 @@ fn conserve_mass(
             p.volume *= factor[c];
         }
     }
-    let unplaced = (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).sum();
+    // What is still unplaced (a cell turning discrete with no points within three cells, a
+    // factor at its bound: the gains of many epochs added up to +1.4% of a turning drum's
+    // mass in 2 s) goes to all the points in proportion to their mass, a uniform change of
+    // order 1e-5 per epoch, so that the total stays to round-off. Beyond ±10% of the points'
+    // mass something else is wrong: the rest is reported, not hidden.
+    let left = |factor: &[f64]| -> f64 { (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).sum() };
+    let held: f64 = (0..count).map(|c| factor[c] * after_p[c]).sum();
+    let unplaced = left(&factor);
+    if held > 0.0 && unplaced.abs() > 1e-12 * held {
+        let all = (1.0 + unplaced / held).clamp(0.9, 1.1);
+        factor
+            .iter_mut()
+            .zip(&after_p)
+            .filter(|(_, p)| **p > 0.0)
+            .for_each(|(f, _)| *f *= all);
+    }
+    let unplaced = left(&factor);
     let scale = points
         .iter()
         .filter(|p| !gone_p.contains(&p.id))
@@ -554,27 +584,31 @@ fn cell_corner(cells: &Grid, n: [usize; 3], c: usize) -> [f64; 3] {
 /// `gap` (dart throwing, 30 darts per point wanted); the centre if no dart lands (so the
 /// cell's mass goes somewhere), none if the centre is not allowed either (the cell's mass
 /// then goes to its neighbours' points).
+#[allow(clippy::too_many_arguments)]
 fn poisson_in_cell(
     dim: usize,
     lo: [f64; 3],
     h: f64,
+    there: &[[f64; 3]],
     target: usize,
     gap: f64,
     allowed: &dyn Fn([f64; 3]) -> bool,
     rng: &mut Rng,
 ) -> Vec<[f64; 3]> {
     let mut xs: Vec<[f64; 3]> = Vec::new();
+    let far = |x: [f64; 3], y: &[f64; 3]| (0..dim).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>() >= gap * gap;
+    let want = target.saturating_sub(there.len());
     for _ in 0..30 * target {
-        if xs.len() == target {
+        if xs.len() == want {
             break;
         }
         let x = [0, 1, 2].map(|k| if k < dim { lo[k] + h * rng.uniform() } else { lo[k] });
-        if allowed(x) && xs.iter().all(|y| (0..dim).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>() >= gap * gap) {
+        if allowed(x) && xs.iter().chain(there).all(|y| far(x, y)) {
             xs.push(x);
         }
     }
     let centre = [0, 1, 2].map(|k| if k < dim { lo[k] + 0.5 * h } else { lo[k] });
-    if xs.is_empty() && allowed(centre) {
+    if xs.is_empty() && there.is_empty() && allowed(centre) {
         xs.push(centre);
     }
     xs
@@ -1030,9 +1064,78 @@ mod tests {
         assert!(plan.delete_points.iter().all(|&id| id < 1000), "{:?}", plan.delete_points);
         let behind = cell_of(&cells, 2, [0.001, 2.0 * H - 0.0003, 0.0]).unwrap();
         assert_ne!(plan.zones[behind], Zone::Discrete);
-        // The ten stray points are 1.2% of the mass: deleting them would show here.
-        let total: f64 = points.iter().map(|p| p.mass).sum();
-        assert!(plan.unplaced.abs() < 1e-3 * total, "{} of {total} kg", plan.unplaced);
         assert!(plan.new_grains.iter().all(|g| g.x[1] > 2.0 * H), "no grain behind the floor");
+    }
+
+    /// Grains far from any point whose cell turns from hybrid to discrete count in full
+    /// after the epoch (half before): the cell cannot give the difference back locally, so
+    /// it comes off all the points, and the total stays. (Left unplaced, such gains added up
+    /// to +1.4% of a turning drum's mass in 2 s.)
+    #[test]
+    fn mass_no_cell_nearby_can_take_comes_off_all_the_points() {
+        let (nodes, cells) = grids();
+        let s = settings();
+        let n0 = cells.nodes[0] as usize;
+        let count = (cells.nodes[0] * cells.nodes[1]) as usize;
+        let m = s.bulk_density * 0.25 * H * H;
+        // A continuum block over cells 0..8 × 0..8, four points a cell.
+        let mut points: Vec<Point> = (0..16 * 16)
+            .map(|i| Point {
+                id: i as u64,
+                x: [((i % 16) as f64 + 0.5) * 0.5 * H, ((i / 16) as f64 + 0.5) * 0.5 * H, 0.0],
+                mass: m,
+                share: 1.0,
+                v: [0.0; 3],
+            })
+            .collect();
+        // Three loose grains in a cell of the band, 12 cells away, counted at 1 − w.
+        let mut grains: Vec<Grain> = (0..3)
+            .map(|i| Grain {
+                id: i,
+                x: [40.3e-3 + 1.1e-3 * (i % 2) as f64, 0.6e-3 + 0.6e-3 * i as f64, 0.0],
+                radius: R,
+                mass: disk_mass(R),
+                share: 1.0 - W,
+                v: [0.0; 3],
+                fixed: false,
+            })
+            .collect();
+        let mut previous = vec![Zone::Discrete; count];
+        for c in 0..count {
+            let (i, j) = (c % n0, c / n0);
+            if i < 8 && j < 8 {
+                previous[c] = Zone::Continuum;
+            }
+        }
+        let lone = cell_of(&cells, 2, grains[0].x).unwrap();
+        previous[lone] = Zone::Hybrid;
+        let before = totals(&cells, &previous, &grains, &points, false).0;
+        let plan = plan::<D2>(
+            &Inputs {
+                nodes: &nodes,
+                kernel: Kernel::Bspline2,
+                cells: &cells,
+                previous: &previous,
+                solid: &[],
+                clearance: &|_| f64::INFINITY,
+                grains: &grains,
+                points: &points,
+                stress: &BTreeMap::new(),
+            },
+            &s,
+            (100, 1000),
+            &mut Rng::new(3),
+        );
+        assert_eq!(plan.zones[lone], Zone::Discrete, "the loose grains' cell turns discrete");
+        apply(&cells, &plan, &mut grains, &mut points);
+        let after = totals(&cells, &plan.zones, &grains, &points, false).0;
+        assert!((after - before).abs() < 1e-12 * before, "{before} -> {after} kg");
+        // A point deep in the block, in no cell that changed, gave its part.
+        let deep = plan
+            .scale_points
+            .iter()
+            .find(|(id, _)| *id == 0)
+            .expect("the corner point is scaled");
+        assert!(deep.1 < 1.0 && deep.1 > 0.99, "{}", deep.1);
     }
 }
