@@ -6,10 +6,11 @@
 //!   [`WINDOW`] (after the start-up, before the silo runs low); check: the hybrid's within 15%
 //!   of the DEM's at the scene's orifice (6 d), the others reported;
 //! - **Beverloo's law** in 2D, W = C ρ_b √g (w − k d)^{3/2} (Beverloo 1961; the 3/2 of a slot,
-//!   e.g. Mankoc et al. 2007): W^{2/3} is linear in w, so a straight-line fit of W^{2/3} over
-//!   the orifices gives k and C for each model; reported with the fit's largest residual.
-//!   The MPM-only runs use 1-mm cells ([`MPM_CELL`]): on the scene's 2-mm grid the orifices
-//!   of 5, 6 and 8 mm open the same three nodes and discharge at the same rate (measured);
+//!   e.g. Mankoc et al. 2007) over w = 6, 8, 10, 12 mm: W^{2/3} is linear in w, so a
+//!   straight-line fit of W^{2/3} over the flowing orifices gives k and C for each model;
+//!   reported with the fit's largest residual. The MPM-only runs use 1-mm cells
+//!   ([`MPM_CELL`]): on the scene's 2-mm grid orifices of 5, 6 and 8 mm opened the same three
+//!   nodes and discharged at the same rate (measured);
 //! - **clogging** at an orifice of 3 grain diameters (`scenes/silo_small_orifice_2d.toml`, 1-mm
 //!   cells as in Yue 2018 Fig. 12): a run is clogged when its rate over the last
 //!   [`CLOG_TAIL`] is under 5% of its model's rate at the 6-d orifice; check: DEM and hybrid
@@ -35,9 +36,10 @@ const D: f64 = 0.001;
 const WINDOW: (f64, f64) = (0.1, 0.45);
 const CLOG_TAIL: f64 = 0.2;
 const RATE_TOLERANCE: f64 = 0.15;
-/// Orifice widths of the Beverloo fit [m] (the DEM clogs at 4 mm, measured) and the small
-/// scene's.
-const ORIFICES: [f64; 4] = [0.005, 0.006, 0.008, 0.010];
+/// Orifice widths of the Beverloo fit [m]: whole cells of the MPM-only runs' grid, whose
+/// node-based walls open (w / h − 1) nodes, as wide as w (the DEM clogs at 4 mm, measured);
+/// and the small scene's.
+const ORIFICES: [f64; 4] = [0.006, 0.008, 0.010, 0.012];
 const REFERENCE: f64 = 0.006;
 const CLOG_ORIFICE: f64 = 0.003;
 /// Cell and step of the MPM-only runs [m, s] (CFL 0.4 at h / c = 2.5e-5 s).

@@ -268,10 +268,19 @@ pub enum GrainTransfer {
 pub enum OracleKind {
     /// Zones given by the scene, never changed.
     Fixed,
-    /// Discrete layer of set thickness at the free surface (Yue 2018 §4.3).
+    /// Zones from the depth below the top surface of the grains' packing fraction, column by
+    /// column against gravity, every `every` steps (Yue 2018 §4.3: discrete only at the
+    /// visible top; walls, floors and cavities stay continuum).
     Layered,
-    /// Zones from the packing-fraction isocontour (Yue 2018 §4).
+    /// Zones from the distance to the packing-fraction isocontour (Yue 2018 §4).
     Surface,
+}
+
+impl OracleKind {
+    /// Whether the oracle moves the zones every `every` steps.
+    pub fn adaptive(self) -> bool {
+        matches!(self, OracleKind::Layered | OracleKind::Surface)
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -400,7 +409,7 @@ impl Scene {
     pub fn epoch_after(&self, step: u64) -> bool {
         self.oracle
             .as_ref()
-            .is_some_and(|o| o.kind == OracleKind::Surface && step.is_multiple_of(o.every))
+            .is_some_and(|o| o.kind.adaptive() && step.is_multiple_of(o.every))
             && self.participants().contains(&Role::Oracle)
     }
 }

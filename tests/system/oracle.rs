@@ -16,7 +16,7 @@ fn f(v: &str) -> f64 {
 /// after the epoch (the solvers' summaries) within 1% of before (the oracle's), the total
 /// momentum within 1% of max(|p|, m √(g d)) (the pile is nearly at rest). The epochs must
 /// convert something (grains or points created or deleted), and the run is the same with the
-/// participants as threads.
+/// participants as threads; the same checks with `oracle.kind = "layered"`.
 #[test]
 fn adaptive_epochs_keep_mass_and_momentum() {
     let _machine = machine();
@@ -24,11 +24,28 @@ fn adaptive_epochs_keep_mass_and_momentum() {
     let out_s = out.to_str().unwrap();
     let (status, err) = run_to_end(&["run", SCENE, "--out", out_s, "--quiet"]);
     assert!(status.success(), "{err}");
-    let dir = run_dir(&err);
+    let text = check_epochs(&run_dir(&err));
+    let (status, err) = run_to_end(&["run", SCENE, "--out", out_s, "--quiet", "--transport", "inproc"]);
+    assert!(status.success(), "{err}");
+    let b = std::fs::read_to_string(run_dir(&err).join("metrics.csv")).unwrap();
+    assert!(
+        grains_launch::outputs::physics_columns(&text) == grains_launch::outputs::physics_columns(&b),
+        "adaptive epochs differ between processes and threads"
+    );
+    // The layered mode (depth below the top of each column, Yue 2018 §4.3) keeps them too.
+    let (status, err) = run_to_end(&["run", SCENE, "--out", out_s, "--quiet", "--set", "oracle.kind=\"layered\""]);
+    assert!(status.success(), "{err}");
+    check_epochs(&run_dir(&err));
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// Every epoch of a run keeps mass within 1% and momentum within 1% of max(|p|, m √(g d));
+/// 10 epochs, at least 2 converting something. Returns the run's metrics.csv.
+fn check_epochs(dir: &std::path::Path) -> String {
     let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
     let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
     let k = |name: &str| header.iter().position(|c| *c == name).unwrap();
-    let rows = metrics_rows(&dir);
+    let rows = metrics_rows(dir);
     let (mut epochs, mut converting) = (0, 0);
     for (i, r) in rows.iter().enumerate() {
         let before = f(&r[k("oracle_mass")]);
@@ -60,15 +77,7 @@ fn adaptive_epochs_keep_mass_and_momentum() {
     }
     assert_eq!(epochs, 10);
     assert!(converting >= 2, "only {converting} epochs converted anything");
-
-    let (status, err) = run_to_end(&["run", SCENE, "--out", out_s, "--quiet", "--transport", "inproc"]);
-    assert!(status.success(), "{err}");
-    let b = std::fs::read_to_string(run_dir(&err).join("metrics.csv")).unwrap();
-    assert!(
-        grains_launch::outputs::physics_columns(&text) == grains_launch::outputs::physics_columns(&b),
-        "adaptive epochs differ between processes and threads"
-    );
-    std::fs::remove_dir_all(&out).unwrap();
+    text
 }
 
 /// The oracle forced to one model: a band at φ0 = 1 km (every cell discrete, no points) gives

@@ -335,11 +335,7 @@ pub fn run<T: Transport, S: Solver>(
         true => Some(session.subscriber::<ZoneCell, StepHeader>(&names::ZONES)?),
         false => None,
     };
-    let adaptive = scene
-        .oracle
-        .as_ref()
-        .is_some_and(|o| o.kind == grains_protocol::scene::OracleKind::Surface)
-        && zones_sub.is_some();
+    let adaptive = scene.oracle.as_ref().is_some_and(|o| o.kind.adaptive()) && zones_sub.is_some();
     let mut epochs = if adaptive { Some(EpochPorts::<T>::open(&session)?) } else { None };
     session.wait_until("the coupler, the oracle and the launcher", |_| {
         step_sub.publisher_count() >= 1

@@ -71,11 +71,7 @@ pub fn layer(scene: &Scene, body: &Body, x: [f64; 3]) -> Layer {
 pub fn band(scene: &Scene) -> (f64, f64) {
     let c = &scene.coupling;
     let (mut centre, mut half) = (c.discrete_layer + 0.5 * c.hybrid_band, 0.5 * c.hybrid_band);
-    if let Some(o) = scene
-        .oracle
-        .as_ref()
-        .filter(|o| o.kind == grains_protocol::scene::OracleKind::Surface)
-    {
+    if let Some(o) = scene.oracle.as_ref().filter(|o| o.kind.adaptive()) {
         centre = o.centre.unwrap_or(centre);
         half = o.half_width.unwrap_or(half);
     }

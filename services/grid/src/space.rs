@@ -289,8 +289,12 @@ pub fn segment_frame(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> SegmentFrame {
 }
 
 impl SegmentFrame {
-    /// Between the segment's ends (the ends themselves excluded) and up to `depth` behind it.
-    pub fn behind_within(&self, depth: f64) -> bool {
-        self.along > 0.0 && self.along < self.length && self.ahead < 0.0 && self.ahead >= -depth
+    /// Between the segment's ends; `closed`: the ends themselves count.
+    pub fn between_ends(&self, closed: bool) -> bool {
+        if closed {
+            (0.0..=self.length).contains(&self.along)
+        } else {
+            self.along > 0.0 && self.along < self.length
+        }
     }
 }

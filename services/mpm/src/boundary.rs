@@ -11,7 +11,7 @@
 //!
 //! A segment (2D) is one-sided on the grid: material stays on its left (the side of the
 //! normal from → to turned counter-clockwise), and nodes on it or up to `thickness` behind it
-//! are in the wall (between its ends: a node level with an end is in the opening). Grains
+//! are in the wall (between its ends, the ends included). Grains
 //! see both sides (the DEM); the continuum only needs the side it fills, and a wall of one
 //! node row would let points leak through between the rows.
 //! A drum keeps material inside its circle; its surface moves at the spin's velocity.
@@ -69,7 +69,8 @@ impl<S: Space> Wall<S> {
                 (0..S::DIM).any(|k| xa[k] < lo[k] || xa[k] > hi[k])
             }
             Geometry::Segment { from, to, thickness } => {
-                segment_frame(S::to_array(from), S::to_array(to), S::to_array(x)).behind_within(thickness)
+                let f = segment_frame(S::to_array(from), S::to_array(to), S::to_array(x));
+                f.between_ends(true) && f.ahead < 0.0 && f.ahead >= -thickness
             }
             Geometry::Drum { center, radius, .. } => {
                 let (c, p) = (S::to_array(center), S::to_array(x));
@@ -108,10 +109,10 @@ impl<S: Space> Wall<S> {
             }
             Geometry::Segment { from, to, thickness } => {
                 let f = segment_frame(S::to_array(from), S::to_array(to), S::to_array(x));
-                // Open ends: a node level with an end is in the opening (an orifice between two
-                // segments ending on nodes keeps its width on the grid, not one cell less). A
-                // node on the segment (ahead = 0) is in it.
-                if f.ahead == 0.0 && f.along > 0.0 && f.along < f.length || f.behind_within(thickness) {
+                // Closed ends: an orifice between two segments ending on nodes opens the
+                // nodes strictly between them, whose velocity falls to zero at the end nodes:
+                // the opening is the orifice's width.
+                if f.between_ends(true) && f.ahead <= 0.0 && f.ahead >= -thickness {
                     correct::<S>(self.contact, v, self.velocity, S::from_array([f.normal[0], f.normal[1], 0.0]))
                 } else {
                     v
@@ -226,7 +227,11 @@ mod tests {
         assert_eq!(bottom.apply(DVec2::new(0.5, 0.05), down, 0.0), down);
         assert_eq!(bottom.apply(DVec2::new(0.5, -0.25), down, 0.0), down);
         assert_eq!(bottom.apply(DVec2::new(1.05, 0.0), down, 0.0), down);
-        assert_eq!(bottom.apply(DVec2::new(1.0, 0.0), down, 0.0), down, "its end is open");
+        assert_eq!(
+            bottom.apply(DVec2::new(1.0, 0.0), down, 0.0),
+            DVec2::new(1.0, 0.0),
+            "its end is in it"
+        );
         // Reversed, its left is −y: material below is held up there, material above is not.
         let mut roof = bottom;
         roof.geometry = Geometry::Segment {

@@ -17,7 +17,7 @@
 //! flowed into a discrete cell, grains into a continuum one) is made hybrid instead, so that
 //! the missing model is created first and the other one deleted at a later epoch.
 
-use crate::{Zone, dims, distance_to_level, enrichment, linear, packing_fraction, zone_of_distance};
+use crate::{Zone, column_depth, dims, distance_to_level, enrichment, linear, packing_fraction, zone_of_distance};
 use grains_dem::packing::Rng;
 use grains_grid::shape::for_each_node;
 use grains_grid::{Grid, Kernel, Space};
@@ -79,6 +79,9 @@ pub struct NewGrain {
 pub struct Settings {
     /// Packing fraction Φρ of the isocontour the distance is measured from.
     pub critical_packing: f64,
+    /// Layered hybridization (Yue 2018 §4.3): the distance is the depth below the top
+    /// surface of each column along this up axis (axis, ±1), not to the nearest surface.
+    pub layered: Option<(usize, f64)>,
     /// φ0: distance from the isocontour, into the material, of the hybrid band's centre [m].
     pub centre: f64,
     /// r_h: half-width of the hybrid band [m].
@@ -197,7 +200,10 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
             *f = 1.0;
         }
     }
-    let distance = distance_to_level(cells, dim, &field, s.critical_packing);
+    let distance = match s.layered {
+        Some(up) => column_depth(cells, dim, &field, s.critical_packing, up),
+        None => distance_to_level(cells, dim, &field, s.critical_packing),
+    };
     // A cell "lacks" a model when that model holds under half of what the other holds.
     let lacks_grains = |c: usize| point_mass[c] > 0.0 && grain_mass[c] < 0.5 * point_mass[c];
     let lacks_points = |c: usize| grain_mass[c] > 0.0 && point_mass[c] < 0.5 * grain_mass[c];
@@ -205,27 +211,13 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
     // A cell behind a wall reads dense, so its own distance says nothing; the material that
     // strays into it (points resting a little behind a floor or a silo bottom) takes the zone
     // of the deepest open cell next to it. Cells with no open neighbour keep their zone.
-    let ijk = |c: usize| [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
     let open_distance = |c: usize| -> Option<f64> {
         if !is_solid(c) {
             return Some(distance[c]);
         }
-        let at = ijk(c);
-        let span = |k: usize| if k < dim { -1i64..=1 } else { 0..=0 };
         let mut deepest: Option<f64> = None;
-        for dz in span(2) {
-            for dy in span(1) {
-                for dx in span(0) {
-                    let q = [at[0] as i64 + dx, at[1] as i64 + dy, at[2] as i64 + dz];
-                    if (0..3).any(|k| q[k] < 0 || q[k] >= n[k] as i64) {
-                        continue;
-                    }
-                    let q = linear(n, q.map(|v| v as usize));
-                    if !is_solid(q) {
-                        deepest = Some(deepest.map_or(distance[q], |d| d.max(distance[q])));
-                    }
-                }
-            }
+        for q in ring(n, dim, c, 1).filter(|&q| !is_solid(q)) {
+            deepest = Some(deepest.map_or(distance[q], |d| d.max(distance[q])));
         }
         deepest
     };
@@ -496,30 +488,10 @@ fn conserve_mass(
     // a factor at its bound) goes to the points of the nearest cells that have points, within
     // three cells, in proportion to their mass: the total stays, the mass moves a cell or two.
     let n = dims(cells, dim);
-    let ijk = |c: usize| [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
     let residual: Vec<f64> = (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).collect();
     for c in (0..count).filter(|&c| residual[c].abs() > 1e-12 * before[c].max(f64::MIN_POSITIVE)) {
-        let at = ijk(c);
-        for ring in 1..=3i64 {
-            let mut near = Vec::new();
-            let span = |k: usize| if k < dim { -ring..=ring } else { 0..=0 };
-            for dz in span(2) {
-                for dy in span(1) {
-                    for dx in span(0) {
-                        if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
-                            continue;
-                        }
-                        let q = [at[0] as i64 + dx, at[1] as i64 + dy, at[2] as i64 + dz];
-                        if (0..3).any(|k| q[k] < 0 || q[k] >= n[k] as i64) {
-                            continue;
-                        }
-                        let q = linear(n, q.map(|v| v as usize));
-                        if after_p[q] > 0.0 {
-                            near.push(q);
-                        }
-                    }
-                }
-            }
+        for r in 1..=3 {
+            let near: Vec<usize> = ring(n, dim, c, r).filter(|&q| after_p[q] > 0.0).collect();
             let total: f64 = near.iter().map(|&q| factor[q] * after_p[q]).sum();
             if total > 0.0 {
                 // No point more than doubles or halves: a sliver of points next to a cell
@@ -530,12 +502,6 @@ fn conserve_mass(
                 }
                 break;
             }
-        }
-    }
-    for p in new_points.iter_mut() {
-        if let Some(c) = cell_of(cells, dim, p.x) {
-            p.mass *= factor[c];
-            p.volume *= factor[c];
         }
     }
     // What is still unplaced (a cell turning discrete with no points within three cells, a
@@ -555,6 +521,12 @@ fn conserve_mass(
             .for_each(|(f, _)| *f *= all);
     }
     let unplaced = left(&factor);
+    for p in new_points.iter_mut() {
+        if let Some(c) = cell_of(cells, dim, p.x) {
+            p.mass *= factor[c];
+            p.volume *= factor[c];
+        }
+    }
     let scale = points
         .iter()
         .filter(|p| !gone_p.contains(&p.id))
@@ -564,6 +536,18 @@ fn conserve_mass(
         })
         .collect();
     (scale, unplaced)
+}
+
+/// The cells at Chebyshev distance `r` (in cells) from cell `c`, on the grid.
+fn ring(n: [usize; 3], dim: usize, c: usize, r: i64) -> impl Iterator<Item = usize> {
+    let at = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])].map(|v| v as i64);
+    let span = move |k: usize| if k < dim { -r..=r } else { 0..=0 };
+    span(2)
+        .flat_map(move |dz| span(1).flat_map(move |dy| span(0).map(move |dx| [dx, dy, dz])))
+        .filter(move |d| d.iter().map(|v| v.abs()).max() == Some(r))
+        .map(move |d| [0, 1, 2].map(|k| at[k] + d[k]))
+        .filter(move |q| (0..3).all(|k| q[k] >= 0 && q[k] < n[k] as i64))
+        .map(move |q| linear(n, q.map(|v| v as usize)))
 }
 
 /// Area of a disk (2D, per metre of thickness) or volume of a sphere (3D) of radius `r`.
@@ -637,6 +621,7 @@ mod tests {
     fn settings() -> Settings {
         Settings {
             critical_packing: 0.5,
+            layered: None,
             centre: 0.006,
             half_width: 0.002,
             radius_mean: R,
@@ -1100,13 +1085,15 @@ mod tests {
                 fixed: false,
             })
             .collect();
-        let mut previous = vec![Zone::Discrete; count];
-        for c in 0..count {
-            let (i, j) = (c % n0, c / n0);
-            if i < 8 && j < 8 {
-                previous[c] = Zone::Continuum;
-            }
-        }
+        let mut previous: Vec<Zone> = (0..count)
+            .map(|c| {
+                if c % n0 < 8 && c / n0 < 8 {
+                    Zone::Continuum
+                } else {
+                    Zone::Discrete
+                }
+            })
+            .collect();
         let lone = cell_of(&cells, 2, grains[0].x).unwrap();
         previous[lone] = Zone::Hybrid;
         let before = totals(&cells, &previous, &grains, &points, false).0;
@@ -1137,5 +1124,43 @@ mod tests {
             .find(|(id, _)| *id == 0)
             .expect("the corner point is scaled");
         assert!(deep.1 < 1.0 && deep.1 > 0.99, "{}", deep.1);
+    }
+
+    /// Layered mode (Yue 2018 §4.3) measures depth below the top only: the free side of a
+    /// block of grains is a surface for "surface" (discrete there), not for "layered"
+    /// (continuum there, as deep as it is below the top).
+    #[test]
+    fn layered_zones_count_depth_below_the_top_only() {
+        let (nodes, cells) = grids();
+        let count = (cells.nodes[0] * cells.nodes[1]) as usize;
+        let grains = lattice(0.0, 0.020, 0.0, 0.024);
+        let side = cell_of(&cells, 2, [0.019, 0.007, 0.0]).unwrap();
+        let run = |layered| {
+            let s = Settings { layered, ..settings() };
+            plan::<D2>(
+                &Inputs {
+                    nodes: &nodes,
+                    kernel: Kernel::Bspline2,
+                    cells: &cells,
+                    previous: &vec![Zone::Hybrid; count],
+                    solid: &[],
+                    clearance: &|_| f64::INFINITY,
+                    grains: &grains,
+                    points: &[],
+                    stress: &BTreeMap::new(),
+                },
+                &s,
+                (1000, 0),
+                &mut Rng::new(1),
+            )
+        };
+        let surface = run(None);
+        let layered = run(Some((1, 1.0)));
+        assert!(surface.distance[side] < 0.002, "near the side: {}", surface.distance[side]);
+        assert!(layered.distance[side] > 0.014, "16 mm below the top: {}", layered.distance[side]);
+        assert_eq!(surface.zones[side], Zone::Discrete);
+        // Grains only there: the cell keeps the grains' model (hybrid) on its way to continuum.
+        assert_eq!(layered.zones[side], Zone::Hybrid);
+        assert!(layered.new_points.iter().any(|p| cell_of(&cells, 2, p.x) == Some(side)));
     }
 }

@@ -72,6 +72,41 @@ pub fn packing_fraction(cells: &Grid, dim: usize, grains: &[([f64; 3], f64)], su
     phi
 }
 
+/// Depth of every cell centre below the top surface of its column [m] (Yue 2018 §4.3,
+/// layered hybridization): walking each column down from the top along `up` (an axis, and
+/// +1 or −1 for the direction that is up), the surface is the top face of the first cell whose
+/// field reaches `level`; cells above it have minus their height above it. Cavities, walls and
+/// floors under the top surface are never near it. Infinite in a column with no such cell.
+pub fn column_depth(cells: &Grid, dim: usize, field: &[f64], level: f64, (axis, up): (usize, f64)) -> Vec<f64> {
+    let n = dims(cells, dim);
+    let h = cells.h;
+    let mut depth = vec![f64::INFINITY; field.len()];
+    let (a, b) = match axis {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    };
+    for i in 0..n[a] {
+        for j in 0..n[b] {
+            let at = |t: usize| {
+                let mut ijk = [0; 3];
+                ijk[axis] = if up > 0.0 { n[axis] - 1 - t } else { t };
+                ijk[a] = i;
+                ijk[b] = j;
+                linear(n, ijk)
+            };
+            let Some(top) = (0..n[axis]).find(|&t| field[at(t)] >= level) else {
+                continue;
+            };
+            for t in 0..n[axis] {
+                // Cell t's centre lies (t − top + 1/2) cells below the top face of cell `top`.
+                depth[at(t)] = (t as f64 - top as f64 + 0.5) * h;
+            }
+        }
+    }
+    depth
+}
+
 /// Signed distance from every cell centre to the isocontour `field = level` [m], positive
 /// where the field is at or above the level. Cells with a neighbour across the level start
 /// from the field's linear extrapolation, |f − level| / |∇f| (central differences; exact for
@@ -389,5 +424,30 @@ mod tests {
         assert_eq!(zone_of_distance(0.006, 0.01, 0.004), Zone::Hybrid);
         assert_eq!(zone_of_distance(0.014, 0.01, 0.004), Zone::Hybrid);
         assert_eq!(zone_of_distance(0.0141, 0.01, 0.004), Zone::Continuum);
+    }
+
+    #[test]
+    fn column_depth_counts_from_the_top_surface_only() {
+        // 4 × 6 cells of 1 m; column 0 dense in rows 0..=3 with an empty pocket at row 1;
+        // column 1 empty; columns 2, 3 dense in rows 0..=1. Up is +y.
+        let g = Grid {
+            origin: [0.0; 3],
+            h: 1.0,
+            nodes: [4, 6, 1],
+        };
+        let mut f = vec![0.0; 24];
+        for (i, j) in [(0, 0), (0, 2), (0, 3), (2, 0), (2, 1), (3, 0), (3, 1)] {
+            f[j * 4 + i] = 1.0;
+        }
+        let d = column_depth(&g, 2, &f, 0.5, (1, 1.0));
+        assert_eq!(d[3 * 4], 0.5, "the top dense cell's centre is half a cell down");
+        assert_eq!(d[4 * 4], -0.5, "the cell above it is half a cell up");
+        assert_eq!(d[4], 2.5, "the pocket under the top is deep, not a surface");
+        assert_eq!(d[1], f64::INFINITY, "an empty column has no surface");
+        assert_eq!(d[4 + 2], 0.5);
+        // Up as −y (gravity along +y): the surface is at the bottom of the dense cells.
+        let d = column_depth(&g, 2, &f, 0.5, (1, -1.0));
+        assert_eq!(d[0], 0.5);
+        assert_eq!(d[4 * 4], 4.5, "counted from the bottom now");
     }
 }

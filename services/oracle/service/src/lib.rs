@@ -38,29 +38,36 @@ pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneErr
     };
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
-        Some(OracleKind::Surface) => {
+        Some(kind @ (OracleKind::Surface | OracleKind::Layered)) => {
+            let name = if kind == OracleKind::Surface { "surface" } else { "layered" };
             if settings(scene).is_none() {
                 return Err(err(
                     "oracle.kind",
-                    "\"surface\" needs a body with model = \"hybrid\" whose material has both [material.dem] and [material.mpm]".into(),
+                    format!("\"{name}\" needs a body with model = \"hybrid\" whose material has both [material.dem] and [material.mpm]"),
+                ));
+            }
+            if kind == OracleKind::Layered && scene.gravity.iter().all(|g| *g == 0.0) {
+                return Err(err(
+                    "oracle.kind",
+                    "\"layered\" measures depth against gravity: the scene has none".into(),
                 ));
             }
             // Its zones cover every cell, so every body's material is converted: a "dem" or
             // "mpm" body would be turned hybrid too. Frozen grains are the boundary: kept.
-            match scene.bodies.iter().position(|b| b.model != Model::Hybrid && !(b.model == Model::Dem && b.frozen)) {
+            match scene
+                .bodies
+                .iter()
+                .position(|b| b.model != Model::Hybrid && !(b.model == Model::Dem && b.frozen))
+            {
                 Some(k) => Err(err(
                     &format!("body.{k}.model"),
-                    "with oracle.kind = \"surface\" every body is \"hybrid\" (the zones move over all material), except frozen \"dem\" bodies".into(),
+                    format!(
+                        "with oracle.kind = \"{name}\" every body is \"hybrid\" (the zones move over all material), except frozen \"dem\" bodies"
+                    ),
                 )),
                 None => Ok(()),
             }
         }
-        Some(OracleKind::Layered) => Err(err(
-            "oracle.kind",
-            "\"layered\" zones that move with the flow are not in this build; allowed: \"fixed\" (layered from the scene at start, \
-             kept by the material) and \"surface\" (from the grains' packing fraction every oracle.every steps)"
-                .into(),
-        )),
     }
 }
 
@@ -74,8 +81,12 @@ pub fn settings(scene: &Scene) -> Option<Settings> {
     let (dem, mpm) = (material.dem.as_ref()?, material.mpm.as_ref()?);
     let c = &scene.coupling;
     let o = scene.oracle.as_ref();
+    // Up is against the largest component of gravity.
+    let g = scene.gravity;
+    let axis = (0..3).max_by(|&a, &b| g[a].abs().total_cmp(&g[b].abs())).unwrap_or(1);
     Some(Settings {
         critical_packing: o.map_or(0.5, |o| o.critical_packing),
+        layered: o.filter(|o| o.kind == OracleKind::Layered).map(|_| (axis, -g[axis].signum())),
         centre: o.and_then(|o| o.centre).unwrap_or(c.discrete_layer + 0.5 * c.hybrid_band),
         half_width: o.and_then(|o| o.half_width).unwrap_or(0.5 * c.hybrid_band),
         radius_mean: dem.radius,
@@ -102,7 +113,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
     let mut epochs = match scene.oracle.as_ref().map(|o| o.kind) {
-        Some(OracleKind::Surface) => Some(Epochs::<T>::open(&session, scene)?),
+        Some(kind) if kind.adaptive() => Some(Epochs::<T>::open(&session, scene)?),
         _ => None,
     };
     session.wait_until("the DEM, the MPM, the coupler and the launcher", |_| {
@@ -519,7 +530,9 @@ pub fn solid_cells(scene: &Scene, cells: &grains_grid::Grid, time: f64, behind: 
                     (0..2).map(|k| (x[k] - c[k]).powi(2)).sum::<f64>() > radius * radius
                 }
                 grains_protocol::scene::WallShape::Segment { from, to } => {
-                    dim == 2 && grains_grid::space::segment_frame(at(from), at(to), x).behind_within(behind + cells.h)
+                    // A cell centred on an end is half in the opening: open.
+                    let f = grains_grid::space::segment_frame(at(from), at(to), x);
+                    dim == 2 && f.between_ends(false) && f.ahead < 0.0 && f.ahead >= -(behind + cells.h)
                 }
             }
         });
