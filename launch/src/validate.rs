@@ -239,6 +239,22 @@ pub(crate) fn frames_of(run_dir: &Path, name: &str) -> anyhow::Result<Vec<(f64, 
         .collect()
 }
 
+/// A packing poured by `grains pack` from `scene` with `overrides`, kept in `--out` as `name`
+/// (poured once: later runs reuse it).
+pub(crate) fn poured(args: &ValidateArgs, name: &str, scene: &str, overrides: Vec<String>) -> anyhow::Result<PathBuf> {
+    let path = std::path::absolute(args.out.join(name))?;
+    if !path.exists() {
+        eprintln!("validate: pouring {name} with grains pack");
+        crate::pack::pack(&crate::pack::PackArgs {
+            scene: args.scenes.join(scene),
+            out: path.clone(),
+            friction: None,
+            overrides,
+        })?;
+    }
+    Ok(path)
+}
+
 /// The last frame listed in `frames/<name>.pvd` of a run, if any.
 fn last_frame(run_dir: &Path, name: &str) -> Option<PathBuf> {
     let pvd = std::fs::read_to_string(run_dir.join("frames").join(format!("{name}.pvd"))).ok()?;

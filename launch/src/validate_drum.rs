@@ -5,7 +5,7 @@
 //! half of the drum's width, a least-squares line through the tops, its angle to the
 //! horizontal; averaged over the frames. Check: the hybrid's within 3° of the DEM's.
 
-use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, run_scene};
+use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, poured, run_scene};
 use crate::validate_silo::slope;
 use anyhow::bail;
 use std::fmt::Write as _;
@@ -49,23 +49,14 @@ struct DrumRun {
 }
 
 fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
-    let path = std::path::absolute(args.out.join("packing_drum_seed1.data"))?;
-    if !path.exists() {
-        eprintln!("validate: pouring the drum packing with grains pack");
-        crate::pack::pack(&crate::pack::PackArgs {
-            scene: args.scenes.join(SCENE),
-            out: path.clone(),
-            friction: None,
-            // The drum at rest, a lattice to 62 mm settling to about half full.
-            overrides: vec![
-                "body.0.model=\"dem\"".into(),
-                "body.0.max=[0.095,0.062]".into(),
-                "wall.0.spin=0.0".into(),
-                "run.duration=0.35".into(),
-            ],
-        })?;
-    }
-    Ok(path)
+    // The drum at rest, a lattice to 62 mm settling to about half full.
+    let overrides = [
+        "body.0.model=\"dem\"",
+        "body.0.max=[0.095,0.062]",
+        "wall.0.spin=0.0",
+        "run.duration=0.35",
+    ];
+    poured(args, "packing_drum_seed1.data", SCENE, overrides.map(String::from).to_vec())
 }
 
 fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> anyhow::Result<DrumRun> {

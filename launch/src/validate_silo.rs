@@ -21,7 +21,7 @@
 //!
 //! `--quick` runs the DEM and the hybrid at the 6-d orifice only (the discharge check).
 
-use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, run_scene};
+use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, poured, run_scene};
 use anyhow::{Context, bail};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -130,23 +130,14 @@ pub fn flying_share(grains: &[([f64; 3], f64)], orifice: f64) -> (usize, usize) 
 }
 
 fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
-    let path = std::path::absolute(args.out.join("packing_silo_60mm_seed1.data"))?;
-    if !path.exists() {
-        eprintln!("validate: pouring the silo packing with grains pack");
-        crate::pack::pack(&crate::pack::PackArgs {
-            scene: args.scenes.join(SCENE),
-            out: path.clone(),
-            friction: None,
-            // Bottom closed, a lattice 80 mm tall settling to about 62 mm.
-            overrides: vec![
-                "body.0.model=\"dem\"".into(),
-                "body.0.max=[0.04,0.14]".into(),
-                format!("wall.0.to=[0.04,{BOTTOM}]"),
-                "run.duration=0.35".into(),
-            ],
-        })?;
-    }
-    Ok(path)
+    // Bottom closed, a lattice 80 mm tall settling to about 62 mm.
+    let overrides = vec![
+        "body.0.model=\"dem\"".into(),
+        "body.0.max=[0.04,0.14]".into(),
+        format!("wall.0.to=[0.04,{BOTTOM}]"),
+        "run.duration=0.35".into(),
+    ];
+    poured(args, "packing_silo_60mm_seed1.data", SCENE, overrides)
 }
 
 /// One run of `scene` with `model`; at `orifice` if given (else the scene's, `CLOG_ORIFICE`).
