@@ -1054,8 +1054,8 @@ mod tests {
 
     /// Grains far from any point whose cell turns from hybrid to discrete count in full
     /// after the epoch (half before): the cell cannot give the difference back locally, so
-    /// it comes off all the points, and the total stays. (Left unplaced, such gains added up
-    /// to +1.4% of a turning drum's mass in 2 s.)
+    /// it comes off all the points, new ones included, and the total stays. (Left unplaced,
+    /// such gains added up to +1.4% of a turning drum's mass in 2 s.)
     #[test]
     fn mass_no_cell_nearby_can_take_comes_off_all_the_points() {
         let (nodes, cells) = grids();
@@ -1096,6 +1096,14 @@ mod tests {
             .collect();
         let lone = cell_of(&cells, 2, grains[0].x).unwrap();
         previous[lone] = Zone::Hybrid;
+        // And a patch of discrete grains beside the block, deep enough to turn hybrid: new
+        // points are made there, and take the spread too.
+        let patch = lattice(0.016, 0.026, 0.0, 0.012);
+        grains.extend(patch.into_iter().map(|g| Grain {
+            id: 100 + g.id,
+            v: [0.0; 3],
+            ..g
+        }));
         let before = totals(&cells, &previous, &grains, &points, false).0;
         let plan = plan::<D2>(
             &Inputs {
@@ -1110,10 +1118,11 @@ mod tests {
                 stress: &BTreeMap::new(),
             },
             &s,
-            (100, 1000),
+            (1000, 1000),
             &mut Rng::new(3),
         );
         assert_eq!(plan.zones[lone], Zone::Discrete, "the loose grains' cell turns discrete");
+        assert!(!plan.new_points.is_empty(), "the patch gets points");
         apply(&cells, &plan, &mut grains, &mut points);
         let after = totals(&cells, &plan.zones, &grains, &points, false).0;
         assert!((after - before).abs() < 1e-12 * before, "{before} -> {after} kg");
