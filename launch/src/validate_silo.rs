@@ -178,7 +178,7 @@ fn run_silo(
     let outcome = run_scene(args, &path, overrides)?;
     if outcome.status != crate::run::Status::Completed {
         bail!(
-            "{SCENE} ({}, orifice {} mm): the run did not complete: {}",
+            "{scene} ({}, orifice {} mm): the run did not complete: {}",
             model.name(),
             orifice * 1e3,
             outcome.message
