@@ -80,6 +80,11 @@ impl Table {
         self.rows.first().map_or(f64::NAN, |r| self.get(r, name))
     }
 
+    /// Mean of column `name` over the rows (NaN without rows).
+    pub(crate) fn mean(&self, name: &str) -> f64 {
+        self.rows.iter().map(|r| self.get(r, name)).sum::<f64>() / self.rows.len() as f64
+    }
+
     pub(crate) fn last(&self, name: &str) -> f64 {
         self.rows.last().map_or(f64::NAN, |r| self.get(r, name))
     }

@@ -70,7 +70,7 @@ fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> 
         bail!("{SCENE}: the run did not complete: {}", outcome.message);
     }
     let table = crate::validate::Table::read(&outcome.dir);
-    let grains = table.rows.iter().map(|r| table.get(r, "dem_items")).sum::<f64>() / table.rows.len().max(1) as f64;
+    let grains = table.mean("dem_items");
     let grain_frames = frames_of(&outcome.dir, "grains")?;
     let point_frames = frames_of(&outcome.dir, "points")?;
     let mut angles = Vec::new();

@@ -185,7 +185,7 @@ fn run_silo(
         );
     }
     let table = crate::validate::Table::read(&outcome.dir);
-    let grains = table.rows.iter().map(|r| table.get(r, "dem_items")).sum::<f64>() / table.rows.len().max(1) as f64;
+    let grains = table.mean("dem_items");
     let mut discharged = Vec::new();
     let (mut flown, mut counted) = (0usize, 0usize);
     let grain_frames = frames_of(&outcome.dir, "grains")?;
