@@ -8,13 +8,17 @@ pub mod bench_dem;
 pub mod bench_hybrid;
 pub mod bench_mpm;
 pub mod bridge;
+pub mod chart;
 pub mod outputs;
 pub mod pack;
 pub mod participants;
+pub mod report;
 pub mod run;
 pub mod validate;
+pub mod validate_cost;
 pub mod validate_drum;
 pub mod validate_silo;
+pub mod validate_stability;
 
 /// Exit code for an error of `grains`: 2 for bad input (scene, flags), 1 otherwise.
 pub fn exit_code(err: &anyhow::Error) -> u8 {

@@ -46,6 +46,7 @@ struct DrumRun {
     frames: usize,
     grains: f64,
     wall: f64,
+    dir: PathBuf,
 }
 
 fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
@@ -94,12 +95,13 @@ fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> 
         frames: angles.len(),
         grains,
         wall: table.last("wall_s"),
+        dir: outcome.dir,
     })
 }
 
 /// Runs the drum part and writes `drum.md` in `--out`; whether the check passed.
-pub fn validate_drum(args: &ValidateArgs) -> anyhow::Result<bool> {
-    std::fs::create_dir_all(&args.out)?;
+pub fn validate_drum(args: &ValidateArgs) -> anyhow::Result<crate::report::Part> {
+    let mut part = crate::report::Part::default();
     let packing = ensure_packing(args)?;
     let scene = load_with(&args.scenes.join(SCENE), &[])?;
     let point_half = 0.5 * scene.domain.cell_size / scene.mpm.points_per_axis as f64;
@@ -110,7 +112,7 @@ pub fn validate_drum(args: &ValidateArgs) -> anyhow::Result<bool> {
     let diff = hybrid.angle - dem.angle;
     let pass = diff.abs() <= ANGLE_TOLERANCE;
     let mut md = String::new();
-    writeln!(md, "# Rotating drum: DEM and hybrid (adaptive zones)\n")?;
+    writeln!(md, "## Rotating drum: DEM and hybrid (adaptive zones)\n")?;
     writeln!(
         md,
         "Scene `{SCENE}` from one poured packing, {} s at 2 rad/s; the free surface's angle (line through the \
@@ -137,9 +139,18 @@ pub fn validate_drum(args: &ValidateArgs) -> anyhow::Result<bool> {
         diff.abs(),
         if pass { "pass" } else { "**FAIL**" }
     )?;
-    std::fs::write(args.out.join("drum.md"), &md)?;
+    part.check(
+        "drum: hybrid angle of repose",
+        format!("pure DEM drum, same packing ({:.1}°; issue 6)", dem.angle),
+        format!("{:.1}° ({:+.1}°)", hybrid.angle, diff),
+        format!("±{ANGLE_TOLERANCE}°"),
+        pass,
+    );
+    let row = crate::validate::scene_use(args, &mut part, "drum_use", SCENE, &hybrid.dir, &dem.dir)?;
+    writeln!(md, "\n### What each run simulates\n\n{}\n{row}", crate::validate::SCENE_USE_HEADER)?;
     eprintln!("validate: drum: DEM {:.1}°, hybrid {:.1}°", dem.angle, hybrid.angle);
-    Ok(pass)
+    part.md = md;
+    Ok(part)
 }
 
 #[cfg(test)]

@@ -21,12 +21,14 @@
 //!
 //! `--quick` runs the DEM and the hybrid at the 6-d orifice only (the discharge check).
 
+use crate::chart::{Chart, Kind, Series};
+use crate::report::Part;
 use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, poured, run_scene};
 use anyhow::{Context, bail};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-const SCENE: &str = "silo_hybrid_2d.toml";
+pub(crate) const SCENE: &str = "silo_hybrid_2d.toml";
 const SMALL_SCENE: &str = "silo_small_orifice_2d.toml";
 /// Height of the silo's bottom and its centre line [m] (the scene's).
 const BOTTOM: f64 = 0.06;
@@ -40,14 +42,14 @@ const RATE_TOLERANCE: f64 = 0.15;
 /// node-based walls open (w / h − 1) nodes, as wide as w (the DEM clogs at 4 mm, measured);
 /// and the small scene's.
 const ORIFICES: [f64; 4] = [0.006, 0.008, 0.010, 0.012];
-const REFERENCE: f64 = 0.006;
+pub(crate) const REFERENCE: f64 = 0.006;
 const CLOG_ORIFICE: f64 = 0.003;
 /// Cell and step of the MPM-only runs [m, s] (CFL 0.4 at h / c = 2.5e-5 s).
-const MPM_CELL: f64 = 0.001;
-const MPM_DT: f64 = 1e-5;
+pub(crate) const MPM_CELL: f64 = 0.001;
+pub(crate) const MPM_DT: f64 = 1e-5;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Model {
+pub(crate) enum Model {
     Dem,
     Hybrid,
     Mpm,
@@ -63,19 +65,20 @@ impl Model {
     }
 }
 
-struct SiloRun {
+pub(crate) struct SiloRun {
     model: Model,
     orifice: f64,
     restitution: Option<f64>,
     /// (time, mass below the bottom) per frame.
     discharged: Vec<(f64, f64)>,
-    rate: f64,
+    pub rate: f64,
     tail_rate: f64,
     /// Share of the bin's grains in flight, averaged over the window's frames.
     flying: f64,
     /// Mean DEM grains over the run.
-    grains: f64,
-    wall: f64,
+    pub grains: f64,
+    pub wall: f64,
+    dir: PathBuf,
 }
 
 /// Least-squares slope of `y` against `x`.
@@ -129,7 +132,7 @@ pub fn flying_share(grains: &[([f64; 3], f64)], orifice: f64) -> (usize, usize) 
     (flying, bin.len())
 }
 
-fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
+pub(crate) fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
     // Bottom closed, a lattice 80 mm tall settling to about 62 mm.
     let overrides = vec![
         "body.0.model=\"dem\"".into(),
@@ -141,13 +144,14 @@ fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
 }
 
 /// One run of `scene` with `model`; at `orifice` if given (else the scene's, `CLOG_ORIFICE`).
-fn run_silo(
+pub(crate) fn run_silo(
     args: &ValidateArgs,
     scene: &str,
     packing: &Path,
     model: Model,
     orifice: Option<f64>,
     restitution: Option<f64>,
+    extra: &[String],
 ) -> anyhow::Result<SiloRun> {
     let path = args.scenes.join(scene);
     let mut overrides = Vec::new();
@@ -173,6 +177,7 @@ fn run_silo(
     if let Some(e) = restitution {
         overrides.push(format!("material.0.dem.restitution={e}"));
     }
+    overrides.extend(extra.iter().cloned());
     let loaded = load_with(&path, &overrides)?;
     let duration = loaded.steps as f64 * loaded.dt;
     let outcome = run_scene(args, &path, overrides)?;
@@ -229,12 +234,13 @@ fn run_silo(
         discharged,
         grains,
         wall: table.last("wall_s"),
+        dir: outcome.dir,
     })
 }
 
 /// Runs the silo part and writes `silo.md` and `silo.csv` in `--out`; whether every check passed.
-pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
-    std::fs::create_dir_all(&args.out)?;
+pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
     let packing = ensure_packing(args)?;
     let scene = load_with(&args.scenes.join(SCENE), &[])?;
     let material = &scene.materials[0];
@@ -249,7 +255,7 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
     for &w in &orifices {
         for &m in &models {
             eprintln!("validate: silo, orifice {:.0} mm: {}", w * 1e3, m.name());
-            let r = run_silo(args, SCENE, &packing, m, Some(w), None)?;
+            let r = run_silo(args, SCENE, &packing, m, Some(w), None, &[])?;
             eprintln!("validate: silo {} w = {:.0} mm: rate {:.3} kg/(m s)", m.name(), w * 1e3, r.rate);
             runs.push(r);
         }
@@ -258,17 +264,16 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
     if !args.quick {
         for &m in &models {
             eprintln!("validate: silo, orifice {:.0} mm (clogging): {}", CLOG_ORIFICE * 1e3, m.name());
-            extra.push(run_silo(args, SMALL_SCENE, &packing, m, None, None)?);
+            extra.push(run_silo(args, SMALL_SCENE, &packing, m, None, None, &[])?);
         }
         for m in [Model::Dem, Model::Hybrid] {
             eprintln!("validate: silo, restitution 0: {}", m.name());
-            extra.push(run_silo(args, SCENE, &packing, m, Some(REFERENCE), Some(0.0))?);
+            extra.push(run_silo(args, SCENE, &packing, m, Some(REFERENCE), Some(0.0), &[])?);
         }
     }
     let rate = |m: Model, w: f64| runs.iter().find(|r| r.model == m && r.orifice == w).map(|r| r.rate);
     let mut md = String::new();
-    let mut pass = true;
-    writeln!(md, "# Silo discharge: DEM, hybrid (adaptive zones), MPM\n")?;
+    writeln!(md, "## Silo discharge: DEM, hybrid (adaptive zones), MPM\n")?;
     writeln!(
         md,
         "Scene `{SCENE}` (a 40 mm silo filled to 60 mm from one poured packing; the hybrid's zones move every {} steps). \
@@ -294,7 +299,13 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
         let check = match r.model {
             Model::Hybrid if r.orifice == REFERENCE => {
                 let ok = err.abs() <= RATE_TOLERANCE;
-                pass &= ok;
+                part.check(
+                    format!("silo {:.0} mm: hybrid discharge rate", r.orifice * 1e3),
+                    format!("pure DEM silo, same packing ({dem:.3} kg/(m s); Yue 2018 §5, issue 6)"),
+                    format!("{:.3} kg/(m s) ({:+.1}%)", r.rate, 100.0 * err),
+                    format!("±{:.0}%", 100.0 * RATE_TOLERANCE),
+                    ok,
+                );
                 if ok { "pass" } else { "**FAIL**" }
             }
             _ => "",
@@ -318,10 +329,16 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
     if orifices.len() >= 4 {
         writeln!(
             md,
-            "\n## Beverloo fits (2D: W = C ρ_b √g (w − k d)^{{3/2}}, ρ_b = {bulk:.0} kg/m³, d = 1 mm)\n"
+            "\n### Beverloo fits (2D: W = C ρ_b √g (w − k d)^{{3/2}}, ρ_b = {bulk:.0} kg/m³, d = 1 mm)\n"
         )?;
         writeln!(md, "| model | C | k | largest misfit of the fit |")?;
         writeln!(md, "|---|---|---|---|")?;
+        let mut chart = Chart {
+            title: "Silo: Beverloo plot".into(),
+            x_label: "orifice w [mm]".into(),
+            y_label: "W^(2/3) [(kg/(m s))^(2/3)]".into(),
+            ..Chart::default()
+        };
         for &m in &models {
             // Clogged orifices are outside Beverloo's law.
             let pts: Vec<(f64, f64)> = orifices
@@ -334,6 +351,19 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
                 continue;
             }
             let (c, k, worst) = beverloo(&pts, bulk, g);
+            // 2D Beverloo: W^(2/3) = (C ρ_b √g)^(2/3) (w − k d), a line in w.
+            let slope = (c * bulk * g.sqrt()).powf(2.0 / 3.0);
+            chart.series.push(Series::new(
+                m.name(),
+                Kind::Points,
+                pts.iter().map(|p| (p.0 * 1e3, p.1.powf(2.0 / 3.0))).collect(),
+            ));
+            let ends = [k * D, ORIFICES[ORIFICES.len() - 1]];
+            chart.series.push(Series::new(
+                format!("{} fit C = {c:.2}, k = {k:.2}", m.name()),
+                Kind::Dashed,
+                ends.iter().map(|&w| (w * 1e3, slope * (w - k * D))).collect(),
+            ));
             writeln!(
                 md,
                 "| {} | {c:.3} | {k:.2} | {:.1}% ({} orifices) |",
@@ -342,12 +372,18 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
                 pts.len()
             )?;
         }
+        part.chart(
+            &args.out,
+            "silo_beverloo",
+            "Silo discharge rates in Beverloo's coordinates, with the fits",
+            &chart,
+        )?;
     }
     let clogs: Vec<&SiloRun> = extra.iter().filter(|r| r.orifice == CLOG_ORIFICE).collect();
     if !clogs.is_empty() {
         writeln!(
             md,
-            "\n## Clogging at w = {:.0} mm (3 d)\n\n`{SMALL_SCENE}` (1-mm cells). Clogged: the rate over the last \
+            "\n### Clogging at w = {:.0} mm (3 d)\n\n`{SMALL_SCENE}` (1-mm cells). Clogged: the rate over the last \
              {CLOG_TAIL} s is under 5% of the model's rate at w = {:.0} mm. Expected (Yue 2018 §5, Fig. 12): DEM and \
              hybrid clog, MPM does not.\n",
             CLOG_ORIFICE * 1e3,
@@ -359,7 +395,26 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
             let reference = rate(r.model, REFERENCE).unwrap_or(f64::NAN);
             let clogged = r.tail_rate < 0.05 * reference;
             let ok = clogged == (r.model != Model::Mpm);
-            pass &= ok;
+            part.check(
+                format!(
+                    "silo {:.0} mm (3 d): {} {}",
+                    CLOG_ORIFICE * 1e3,
+                    r.model.name(),
+                    if r.model == Model::Mpm { "flows" } else { "clogs" }
+                ),
+                "Yue 2018 §5 Fig. 12: grains clog a 3-d orifice, a continuum flows",
+                format!(
+                    "last {CLOG_TAIL} s: {:.4} kg/(m s), {:.1}% of its 6-mm rate",
+                    r.tail_rate,
+                    100.0 * r.tail_rate / reference
+                ),
+                if r.model == Model::Mpm {
+                    "≥ 5% (flowing)"
+                } else {
+                    "< 5% (clogged)"
+                },
+                ok,
+            );
             writeln!(
                 md,
                 "| {} | {:.4} | {:.4} | {} | {} |",
@@ -371,7 +426,7 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
             )?;
         }
     }
-    writeln!(md, "\n## Bouncing grains (w = {:.0} mm)\n", REFERENCE * 1e3)?;
+    writeln!(md, "\n### Bouncing grains (w = {:.0} mm)\n", REFERENCE * 1e3)?;
     writeln!(
         md,
         "Share of the bin's grains in flight (no contact, outside the jet, off the walls), averaged over the window's frames (reported).\n"
@@ -391,8 +446,27 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
         let e = r.restitution.map_or(e0.clone(), |e| e.to_string());
         writeln!(md, "| {} | {e} | {:.2}% |", r.model.name(), 100.0 * r.flying)?;
     }
-    writeln!(md, "\nOverall: {}", if pass { "pass" } else { "**FAIL**" })?;
-    std::fs::write(args.out.join("silo.md"), &md)?;
+    let mut chart = Chart {
+        title: format!("Silo, {:.0} mm orifice: mass discharged", REFERENCE * 1e3),
+        x_label: "time [s]".into(),
+        y_label: "mass below the bottom [kg/m]".into(),
+        ..Chart::default()
+    };
+    for r in runs.iter().filter(|r| r.orifice == REFERENCE) {
+        chart.series.push(Series::new(r.model.name(), Kind::Line, r.discharged.clone()));
+    }
+    part.chart(&args.out, "silo_discharge", "Mass discharged through the reference orifice", &chart)?;
+    let dem = runs.iter().find(|r| r.orifice == REFERENCE && r.model == Model::Dem);
+    let hybrid = runs.iter().find(|r| r.orifice == REFERENCE && r.model == Model::Hybrid);
+    if let (Some(d), Some(h)) = (dem, hybrid) {
+        let row = crate::validate::scene_use(args, &mut part, "silo_use", SCENE, &h.dir, &d.dir)?;
+        writeln!(
+            md,
+            "\n### What each run simulates ({:.0} mm)\n\n{}\n{row}",
+            REFERENCE * 1e3,
+            crate::validate::SCENE_USE_HEADER
+        )?;
+    }
     let mut csv = String::from("model,orifice_m,restitution,time_s,discharged_kg_per_m\n");
     for r in runs.iter().chain(&extra) {
         for (t, m) in &r.discharged {
@@ -406,8 +480,9 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<bool> {
         }
     }
     std::fs::write(args.out.join("silo.csv"), csv)?;
-    eprintln!("validate: silo report in {}", args.out.join("silo.md").display());
-    Ok(pass)
+    writeln!(md, "\nAll discharge curves: `silo.csv`.")?;
+    part.md = md;
+    Ok(part)
 }
 
 #[cfg(test)]

@@ -42,8 +42,14 @@ pub struct Running {
 
 impl Running {
     pub fn start(program: &Path, args: &[&str]) -> Running {
+        Running::start_with_env(program, args, &[])
+    }
+
+    /// As [`Running::start`], with extra environment variables.
+    pub fn start_with_env(program: &Path, args: &[&str], env: &[(&str, &str)]) -> Running {
         let mut child = Command::new(program)
             .args(args)
+            .envs(env.iter().copied())
             .current_dir(repo())
             .stdout(Stdio::null())
             .stderr(Stdio::piped())

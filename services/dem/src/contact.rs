@@ -90,7 +90,18 @@ pub fn damping_factor(restitution: f64, stiffness: f64) -> f64 {
         return 2.0 * stiffness.sqrt();
     }
     let ln_e = restitution.ln();
-    -2.0 * ln_e * (stiffness / (std::f64::consts::PI.powi(2) + ln_e * ln_e)).sqrt()
+    -2.0 * ln_e * (stiffness / (std::f64::consts::PI.powi(2) + ln_e * ln_e)).sqrt() * fault_scale()
+}
+
+/// A deliberately broken build, at run time: `GRAINS_FAULT=restitution-damping-x2` doubles
+/// the damping derived from a restitution coefficient. Only for the test that shows
+/// `grains validate --quick` failing on a broken contact law; 1 otherwise.
+fn fault_scale() -> f64 {
+    static SCALE: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+    *SCALE.get_or_init(|| match std::env::var("GRAINS_FAULT").as_deref() {
+        Ok("restitution-damping-x2") => 2.0,
+        _ => 1.0,
+    })
 }
 
 /// Reduced mass of a pair [kg]; a wall (infinite mass) is `f64::INFINITY`.

@@ -1,0 +1,284 @@
+//! `grains validate --part cost`: accuracy against cost. Each run's error against the finest
+//! pure-DEM run of the same problem, against its wall time, with the Pareto front marked (the
+//! runs no other run beats in both).
+//!
+//! - **Column collapse, a = 1**: the reference is the DEM of 1-mm grains on packing 1 (the
+//!   column part's run). DEM of 1.5- and 2-mm grains (own poured packings; viscous damping
+//!   scaled with √m ∝ d so that the restitution stays that of the 1-mm grains, DEM step scaled
+//!   with d as the critical step), DEM of 1-mm grains with steps of 2e-6 and 7.1e-6 s (the
+//!   scene's 5e-7 s is 1/72 of the critical step), MPM on 4-, 2- and 1-mm cells (step ∝ cell), hybrid with
+//!   discrete layers of 2, 4 and 8 mm on 2-mm cells and 8 mm on 4-mm cells. Errors: runout
+//!   |ΔL/ΔL_ref − 1| and the profile's L1 distance (in reference grain diameters).
+//! - **Silo, 6-mm orifice**: the reference is the DEM silo; hybrid with discrete layers of 4
+//!   and 8 mm, MPM on 1- and 2-mm cells. Error: |W/W_ref − 1| of the discharge rate. A coarser
+//!   DEM is left out here: grains of 1.5 d would make the orifice 4 grains wide, another
+//!   silo (Beverloo's k d term), not a cheaper model of the same one.
+
+use crate::chart::{Chart, Kind, Series, pareto_front};
+use crate::report::Part;
+use crate::validate::{
+    BIN, FRONT_HEIGHT, L0_COLUMN as L0, RunResult, ValidateArgs, deposit, ensure_packing, finished, front, load_with, poured, profile,
+    profile_l1, run_case,
+};
+use crate::validate_silo::{self as silo, Model};
+use std::fmt::Write as _;
+
+/// One run of the chart.
+struct Row {
+    family: &'static str,
+    label: String,
+    wall: f64,
+    /// Relative error of the headline measure (runout or discharge rate).
+    error: f64,
+    /// Profile L1 in grain diameters (column only; NaN otherwise).
+    l1: f64,
+    grains: u64,
+    points: u64,
+}
+
+pub fn validate_cost(args: &ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
+    let mut md = String::from("## Accuracy against cost\n\n");
+    md.push_str(
+        "Every run's error against the finest pure-DEM run of the same problem, against its wall time (one run each, \
+         on this machine, beside nothing else the validation starts). Pareto front: the runs no other run beats in both \
+         wall time and error.\n\n",
+    );
+    let column = column_rows(args)?;
+    table(&mut md, "Column collapse, a = 1 (error: runout)", &column, true);
+    part.chart(
+        &args.out,
+        "cost_column",
+        "Column collapse: runout error against wall time",
+        &cost_chart(
+            "Column collapse a = 1: accuracy against cost",
+            "|runout / DEM(1 mm) runout - 1|",
+            &column,
+        ),
+    )?;
+    let silo = silo_rows(args)?;
+    table(&mut md, "Silo, 6-mm orifice (error: discharge rate)", &silo, false);
+    part.chart(
+        &args.out,
+        "cost_silo",
+        "Silo: discharge-rate error against wall time",
+        &cost_chart("Silo, 6 mm orifice: accuracy against cost", "|W / DEM W - 1|", &silo),
+    )?;
+    part.md = md;
+    Ok(part)
+}
+
+fn table(md: &mut String, title: &str, rows: &[Row], l1: bool) {
+    let front = pareto_front(&rows.iter().map(|r| (r.wall, r.error)).collect::<Vec<_>>());
+    let _ = writeln!(
+        md,
+        "### {title}\n\n| model | run | grains | points | wall s | error |{} Pareto |\n|---|---|---:|---:|---:|---:|{}---|",
+        if l1 { " profile L1 (d) |" } else { "" },
+        if l1 { "---:|" } else { "" }
+    );
+    for (i, r) in rows.iter().enumerate() {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {:.1} | {:.1}% |{} {} |",
+            r.family,
+            r.label,
+            r.grains,
+            r.points,
+            r.wall,
+            100.0 * r.error,
+            if l1 { format!(" {:.2} |", r.l1) } else { String::new() },
+            if front.contains(&i) { "yes" } else { "" }
+        );
+    }
+    md.push('\n');
+}
+
+fn cost_chart(title: &str, y: &str, rows: &[Row]) -> Chart {
+    let mut chart = Chart {
+        title: title.into(),
+        x_label: "wall time [s]".into(),
+        y_label: y.into(),
+        log_x: true,
+        log_y: true,
+        ..Chart::default()
+    };
+    for family in ["DEM", "MPM", "hybrid"] {
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.family == family)
+            // The reference has no error: drawn at 0.1% so that it shows on a log axis.
+            .map(|r| (r.wall, r.error.max(1e-3)))
+            .collect();
+        if !pts.is_empty() {
+            chart.series.push(Series::new(family, Kind::Points, pts));
+        }
+    }
+    let mut front: Vec<(f64, f64)> = pareto_front(&rows.iter().map(|r| (r.wall, r.error)).collect::<Vec<_>>())
+        .into_iter()
+        .map(|i| (rows[i].wall, rows[i].error.max(1e-3)))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    chart.series.push(Series::new("Pareto front", Kind::Dashed, front));
+    chart
+}
+
+/// A packing of grains `s` times the scenes' 1 mm, for columns up to a = 1.
+fn coarse_packing(args: &ValidateArgs, s: f64, grain: &[String]) -> anyhow::Result<std::path::PathBuf> {
+    let pour_top = 1.5 * s * 1e-3 + 1.35 * L0 + 0.005;
+    let mut overrides = vec![
+        format!("body.0.min=[0.0,{}]", 1.5 * s * 1e-3),
+        format!("body.0.max=[{L0},{pour_top}]"),
+        format!("body.1.max=[{L0},{}]", 1.3 * s * 1e-3),
+        format!("run.duration={:.2}", (2.0 * pour_top / 9.81).sqrt() + 0.2),
+    ];
+    overrides.extend(grain.iter().cloned());
+    poured(args, &format!("packing_column_d{s}mm.data"), "column_packing_2d.toml", overrides)
+}
+
+fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
+    let a = 1.0;
+    let hybrid = load_with(&args.scenes.join("column_collapse_hybrid_2d.toml"), &[])?;
+    let n_bins = ((hybrid.domain.max[0] / BIN) as usize).max(1);
+    let packing = ensure_packing(args, a, 1)?;
+    eprintln!("validate: cost, column: DEM 1 mm (reference)");
+    let reference = run_case(args, "column_collapse_2d.toml", &packing, a, &[])?;
+    let h_ref = profile(&deposit(&reference.dir, 0.0)?, BIN, n_bins);
+    let runout_ref = front(&h_ref, BIN, FRONT_HEIGHT) - L0;
+    let mut rows = Vec::new();
+    let mut push = |family: &'static str, label: String, r: &RunResult, point_half: f64| -> anyhow::Result<()> {
+        let h = profile(&deposit(&r.dir, point_half)?, BIN, n_bins);
+        let f = front(&h, BIN, FRONT_HEIGHT);
+        let error = ((f - L0) / runout_ref - 1.0).abs();
+        eprintln!(
+            "validate: cost, column {family} {label}: front {f:.3} m, error {:.1}%, {:.1} s",
+            100.0 * error,
+            r.wall
+        );
+        rows.push(Row {
+            family,
+            label,
+            wall: r.wall,
+            error,
+            l1: profile_l1(&h_ref, &h, (f).max(runout_ref + L0)),
+            grains: r.grains,
+            points: r.points,
+        });
+        Ok(())
+    };
+    push("DEM", "d = 1 mm (reference)".into(), &reference, 0.0)?;
+    for s in [1.5f64, 2.0] {
+        let d = s * 1e-3;
+        let grain = vec![
+            format!("material.0.dem.radius={}", 0.5 * d),
+            format!("material.0.dem.radius_std={}", 4e-5 * s),
+            format!("material.0.dem.damping={}", 7.0 * s),
+            format!("coupling.substeps={}", (100.0 / s).round()),
+        ];
+        let packing = coarse_packing(args, s, &grain)?;
+        let mut extra = grain.clone();
+        extra.extend([format!("body.0.min=[0.0,{}]", 1.5 * d), format!("body.1.max=[0.5,{}]", 1.3 * d)]);
+        // run_case puts the column's top at 1.5 mm + a L0; the coarse floor row is thicker.
+        extra.push(format!("body.0.max=[{L0},{}]", 1.5 * d + a * L0));
+        eprintln!("validate: cost, column: DEM d = {s} mm");
+        let r = run_case(args, "column_collapse_2d.toml", &packing, a, &extra)?;
+        push("DEM", format!("d = {s} mm"), &r, 0.0)?;
+    }
+    // The scene's DEM step (Chen 2021: 5e-7 s) is 1/72 of the critical step; larger ones, up
+    // to the 1/5 `grains run` allows.
+    for substeps in [25, 7] {
+        eprintln!("validate: cost, column: DEM d = 1 mm, {substeps} substeps");
+        let r = run_case(
+            args,
+            "column_collapse_2d.toml",
+            &packing,
+            a,
+            &[format!("coupling.substeps={substeps}")],
+        )?;
+        push("DEM", format!("d = 1 mm, dt = {:.2e} s", 5e-5 / substeps as f64), &r, 0.0)?;
+    }
+    let mpm = args.scenes.join("column_collapse_mpm_2d.toml");
+    for cell in [4.0, 2.0, 1.0] {
+        let h = cell * 1e-3;
+        let mut overrides = vec![
+            format!("body.0.max=[{L0},{}]", a * L0),
+            "run.duration=0.3".to_string(),
+            format!("domain.cell_size={h}"),
+            format!("run.dt={:e}", 1e-5 * cell / 2.0),
+        ];
+        let steps = load_with(&mpm, &overrides)?.steps;
+        overrides.push(format!("output.frames_every={steps}"));
+        eprintln!("validate: cost, column: MPM cell {cell} mm");
+        let r = finished(args, &mpm, overrides)?;
+        push("MPM", format!("cell {cell} mm"), &r, 0.25 * h)?;
+    }
+    for (cell, layer) in [(2.0, 2.0), (2.0, 4.0), (2.0, 8.0), (4.0, 8.0)] {
+        let extra = vec![
+            format!("domain.cell_size={}", cell * 1e-3),
+            format!("coupling.discrete_layer={}", layer * 1e-3),
+            format!("coupling.hybrid_band={}", layer * 1e-3),
+        ];
+        eprintln!("validate: cost, column: hybrid cell {cell} mm, layer {layer} mm");
+        let r = run_case(args, "column_collapse_hybrid_2d.toml", &packing, a, &extra)?;
+        push("hybrid", format!("cell {cell} mm, layer {layer} mm"), &r, 0.25 * cell * 1e-3)?;
+    }
+    Ok(rows)
+}
+
+fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
+    let packing = silo::ensure_packing(args)?;
+    let w = Some(silo::REFERENCE);
+    let mut rows = Vec::new();
+    eprintln!("validate: cost, silo: DEM (reference)");
+    let reference = silo::run_silo(args, silo::SCENE, &packing, Model::Dem, w, None, &[])?;
+    let mut push = |family: &'static str, label: String, r: silo::SiloRun| {
+        let error = (r.rate / reference.rate - 1.0).abs();
+        eprintln!(
+            "validate: cost, silo {family} {label}: W {:.3}, error {:.1}%, {:.1} s",
+            r.rate,
+            100.0 * error,
+            r.wall
+        );
+        rows.push(Row {
+            family,
+            label,
+            wall: r.wall,
+            error,
+            l1: f64::NAN,
+            grains: r.grains.round() as u64,
+            points: 0,
+        });
+    };
+    for layer in [4.0, 8.0] {
+        let extra = [
+            format!("coupling.discrete_layer={}", layer * 1e-3),
+            format!("coupling.hybrid_band={}", layer * 1e-3),
+        ];
+        eprintln!("validate: cost, silo: hybrid layer {layer} mm");
+        let r = silo::run_silo(args, silo::SCENE, &packing, Model::Hybrid, w, None, &extra)?;
+        push("hybrid", format!("cell 2 mm, layer {layer} mm (mean grains)"), r);
+    }
+    for cell in [silo::MPM_CELL, 2.0 * silo::MPM_CELL] {
+        let extra = [
+            format!("domain.cell_size={cell}"),
+            format!("run.dt={:e}", silo::MPM_DT * cell / silo::MPM_CELL),
+        ];
+        eprintln!("validate: cost, silo: MPM cell {} mm", cell * 1e3);
+        let r = silo::run_silo(args, silo::SCENE, &packing, Model::Mpm, w, None, &extra)?;
+        push("MPM", format!("cell {} mm", cell * 1e3), r);
+    }
+    let reference_wall = reference.wall;
+    let grains = reference.grains.round() as u64;
+    rows.insert(
+        0,
+        Row {
+            family: "DEM",
+            label: "d = 1 mm (reference; mean grains)".into(),
+            wall: reference_wall,
+            error: 0.0,
+            l1: f64::NAN,
+            grains,
+            points: 0,
+        },
+    );
+    Ok(rows)
+}
