@@ -115,7 +115,7 @@ pub struct ValidateArgs {
     #[arg(long, default_value = "")]
     pub out: PathBuf,
     /// DEM substeps per MPM step to sweep for stability (hybrid, a = 1, first 0.2 s); the
-    /// default set 1, 2, 5, 10, 20, 40, 80, 160 runs without `--quick`.
+    /// default set 2, 5, 10, 20, 40, 80, 160 runs without `--quick`.
     #[arg(long, value_delimiter = ',')]
     pub sweep_k: Vec<u32>,
     /// The hybrid pile at rest whose surface drift is measured with both grain transfers.
@@ -639,14 +639,31 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<bool> {
     let t0 = std::time::Instant::now();
     let mut parts = Vec::new();
     for p in PARTS.iter().filter(|p| wants(p)) {
-        parts.push(match *p {
-            "contact" => crate::validate_stability::validate_contact(args)?,
-            "stability" => crate::validate_stability::validate_stability(args)?,
-            "column" => validate_column(args)?,
-            "silo" => crate::validate_silo::validate_silo(args)?,
-            "drum" => crate::validate_drum::validate_drum(args)?,
-            _ => crate::validate_cost::validate_cost(args)?,
-        });
+        let result = match *p {
+            "contact" => crate::validate_stability::validate_contact(args),
+            "stability" => crate::validate_stability::validate_stability(args),
+            "column" => validate_column(args),
+            "silo" => crate::validate_silo::validate_silo(args),
+            "drum" => crate::validate_drum::validate_drum(args),
+            _ => crate::validate_cost::validate_cost(args),
+        };
+        // A part that cannot finish (a run refused or failed) is a failed check; the other
+        // parts still run and report.
+        parts.push(result.unwrap_or_else(|e| {
+            eprintln!("validate: part {p} failed: {e:#}");
+            let mut part = Part {
+                md: format!("## Part `{p}`: did not finish\n\n{e:#}\n"),
+                ..Part::default()
+            };
+            part.check(
+                format!("part {p} ran to its end"),
+                "every run of the part completes",
+                format!("{e:#}"),
+                "no error",
+                false,
+            );
+            part
+        }));
     }
     let preamble = format!(
         "`grains validate{}` (grains {}), {} UTC, {:.0} min on {} threads. Parts: {}. Every check names what it is \

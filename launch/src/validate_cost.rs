@@ -203,6 +203,8 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             format!("body.0.max=[{L0},{}]", a * L0),
             "run.duration=0.3".to_string(),
             format!("domain.cell_size={h}"),
+            // The material stays two cells inside the domain's wall layers.
+            format!("domain.min=[{},{}]", -3.0 * h, -3.0 * h),
             format!("run.dt={:e}", 1e-5 * cell / 2.0),
         ];
         let steps = load_with(&mpm, &overrides)?.steps;

@@ -391,7 +391,7 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
 /// The process maps of the hybrid: substeps k and the cell / grain ratio.
 fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
     let ks = if args.sweep_k.is_empty() {
-        vec![1, 2, 5, 10, 20, 40, 80, 160]
+        vec![2, 5, 10, 20, 40, 80, 160]
     } else {
         args.sweep_k.clone()
     };
