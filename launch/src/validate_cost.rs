@@ -216,6 +216,7 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
     for (cell, layer) in [(2.0, 2.0), (2.0, 4.0), (2.0, 8.0), (4.0, 8.0)] {
         let extra = vec![
             format!("domain.cell_size={}", cell * 1e-3),
+            format!("domain.min=[{},{}]", -3e-3 * cell, -3e-3 * cell),
             format!("coupling.discrete_layer={}", layer * 1e-3),
             format!("coupling.hybrid_band={}", layer * 1e-3),
         ];

@@ -467,6 +467,8 @@ fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow:
         let layer = (4e-3f64).max(2.0 * cell);
         let extra = vec![
             format!("domain.cell_size={cell}"),
+            // The material stays two cells inside the domain's wall layers.
+            format!("domain.min=[{},{}]", -3.0 * cell, -3.0 * cell),
             format!("coupling.discrete_layer={layer}"),
             format!("coupling.hybrid_band={layer}"),
         ];
