@@ -60,6 +60,10 @@ pub struct Chart {
     pub log_y: bool,
     pub series: Vec<Series>,
     pub vlines: Vec<VLine>,
+    /// Small text at data points (x, y): which run a point is.
+    pub notes: Vec<(f64, f64, String)>,
+    /// Legend in the lower left instead of the upper left.
+    pub legend_low: bool,
 }
 
 const COLOURS: [RGBColor; 8] = [
@@ -213,11 +217,21 @@ impl Chart {
                 ("sans-serif", 14).into_font(),
             )))?;
         }
+        for (x, y, text) in &self.notes {
+            let p = (Self::map(lx, *x), Self::map(ly, *y));
+            if ok(&(*x, *y)) {
+                chart.draw_series(std::iter::once(Text::new(text.clone(), p, ("sans-serif", 11).into_font())))?;
+            }
+        }
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.4))
-            .position(SeriesLabelPosition::UpperLeft)
+            .position(if self.legend_low {
+                SeriesLabelPosition::LowerLeft
+            } else {
+                SeriesLabelPosition::UpperLeft
+            })
             .draw()?;
         root.present()
     }

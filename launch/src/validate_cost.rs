@@ -100,13 +100,16 @@ fn cost_chart(title: &str, y: &str, rows: &[Row]) -> Chart {
         y_label: y.into(),
         log_x: true,
         log_y: true,
+        legend_low: true,
+        notes: rows.iter().map(|r| (r.wall, r.error.max(1e-3), format!("  {}", r.label))).collect(),
         ..Chart::default()
     };
     for family in ["DEM", "MPM", "hybrid"] {
         let pts: Vec<(f64, f64)> = rows
             .iter()
             .filter(|r| r.family == family)
-            // The reference has no error: drawn at 0.1% so that it shows on a log axis.
+            // The reference has no error: drawn at 0.1% so that it shows on a log axis (its
+            // label says so).
             .map(|r| (r.wall, r.error.max(1e-3)))
             .collect();
         if !pts.is_empty() {
@@ -165,7 +168,7 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
         });
         Ok(())
     };
-    push("DEM", "d = 1 mm (reference)".into(), &reference, 0.0)?;
+    push("DEM", "d = 1 mm (reference, error drawn at 0.1%)".into(), &reference, 0.0)?;
     for s in [1.5f64, 2.0] {
         let d = s * 1e-3;
         let grain = vec![
@@ -248,7 +251,7 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             error,
             l1: f64::NAN,
             grains: r.grains.round() as u64,
-            points: 0,
+            points: crate::validate::Table::read(&r.dir).mean("mpm_items").round() as u64,
         });
     };
     for layer in [4.0, 8.0] {
@@ -258,7 +261,7 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
         ];
         eprintln!("validate: cost, silo: hybrid layer {layer} mm");
         let r = silo::run_silo(args, silo::SCENE, &packing, Model::Hybrid, w, None, &extra)?;
-        push("hybrid", format!("cell 2 mm, layer {layer} mm (mean grains)"), r);
+        push("hybrid", format!("cell 2 mm, layer {layer} mm (mean counts)"), r);
     }
     for cell in [silo::MPM_CELL, 2.0 * silo::MPM_CELL] {
         let extra = [
@@ -275,7 +278,7 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
         0,
         Row {
             family: "DEM",
-            label: "d = 1 mm (reference; mean grains)".into(),
+            label: "d = 1 mm (reference, error drawn at 0.1%; mean grains)".into(),
             wall: reference_wall,
             error: 0.0,
             l1: f64::NAN,

@@ -78,7 +78,7 @@ pub(crate) struct SiloRun {
     /// Mean DEM grains over the run.
     pub grains: f64,
     pub wall: f64,
-    dir: PathBuf,
+    pub dir: PathBuf,
 }
 
 /// Least-squares slope of `y` against `x`.

@@ -268,6 +268,7 @@ fn map_chart(title: &str, x: &str, y: &str, probes: &[Probe], vlines: Vec<VLine>
             Series::new("criterion", Kind::Dashed, vec![(lo, bound), (hi, bound)]),
         ],
         vlines,
+        ..Chart::default()
     }
 }
 
