@@ -987,8 +987,10 @@ fn column_outputs(args: &ValidateArgs, cases: &[Case], summaries: &[Summary], pi
             chart.series.push(Series::new(name, Kind::Points, pts.to_vec()));
         }
         if name == "DEM"
-            && let (Some(l), Some((c, n))) = (lambda, power)
+            && let Some(l) = lambda
         {
+            // Without ratios above the crossover, the line alone (the power law's points are NaN).
+            let (c, n) = power.unwrap_or((f64::NAN, f64::NAN));
             chart
                 .series
                 .push(Series::new("DEM fit", Kind::Line, law_curve(l, c, n, a_lo, a_hi)));
