@@ -112,7 +112,10 @@ pub struct ValidateArgs {
     #[arg(long, default_value = "scenes")]
     pub scenes: PathBuf,
     /// Where the runs and the report go (default `out/validate/<today>`).
-    #[arg(long, default_value = "")]
+    #[arg(long = "out", value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// `--out`, or its default, once `validate` has chosen it.
+    #[arg(skip)]
     pub out: PathBuf,
     /// DEM substeps per MPM step to sweep for stability (hybrid, a = 1, first 0.2 s); the
     /// default set 2, 5, 10, 20, 40, 80, 160 runs without `--quick`.
@@ -627,9 +630,10 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<bool> {
         )));
     }
     let mut args = args.clone();
-    if args.out.as_os_str().is_empty() {
-        args.out = PathBuf::from("out/validate").join(crate::report::today());
-    }
+    args.out = args
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out/validate").join(crate::report::today()));
     std::fs::create_dir_all(&args.out)?;
     let args = &args;
     // The drum and the accuracy-cost runs take longer than the quick set allows: full runs
