@@ -202,6 +202,12 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         Some(args) => Some(args.resolve().map_err(|e| BadInput(format!("{e:#}")))?),
         None => None,
     };
+    // A launcher killed outright (SIGKILL) leaves its run's files in /dev/shm.
+    for (dead, files) in ipc::remove_dead_runs() {
+        if opts.announce {
+            eprintln!("grains: removed {} files left by run {dead}, whose processes are all gone", files.len());
+        }
+    }
     let run_id = new_run_id();
     let dir = opts.out_root.join(&scene.name).join(&run_id);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
@@ -222,7 +228,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     };
     let (report, participants) = match opts.transport {
         TransportKind::Ipc => {
-            let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary())?;
+            let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary(), StopFlag::with_signals().as_cancel())?;
             let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
             let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
             let bridge = || match &bridge_args {

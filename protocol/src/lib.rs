@@ -95,3 +95,25 @@ pub fn run_id_str(bytes: &[u8; 32]) -> String {
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(32);
     String::from_utf8_lossy(&bytes[..end]).into_owned()
 }
+
+/// A number for a message: as written when that is short (`-9.81`, `0.0005`), in scientific
+/// notation when it is very large or small (`1e308`, not a 309-digit integer).
+pub fn number(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(super::number(1e308), "1e308");
+        assert_eq!(super::number(-2.5e-9), "-2.5e-9");
+        assert_eq!(super::number(-9.81), "-9.81");
+        assert_eq!(super::number(0.0), "0");
+        assert_eq!(super::number(1e6), "1000000");
+    }
+}

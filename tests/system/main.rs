@@ -121,6 +121,71 @@ fn killing_any_participant_ends_the_run_within_2_s_and_leaves_nothing() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// Whether process `pid` is gone (or a zombie nobody reaped yet: it runs nothing).
+fn process_gone(pid: i32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => true,
+        Ok(stat) => stat.rsplit(')').next().is_some_and(|rest| rest.trim_start().starts_with('Z')),
+    }
+}
+
+/// Issue 20: after SIGKILL of the launcher, every participant it started exits within 2 s
+/// (a DEM-only run's grains-dem ran on to its last step before), and the next `grains run`
+/// removes the files the dead run left in /dev/shm.
+#[test]
+fn killing_the_launcher_stops_its_participants_within_2_s_and_the_next_run_cleans_up() {
+    let _machine = machine();
+    let out = out_dir("kill-launcher");
+    let out_s = out.to_str().unwrap();
+    let scenes = [
+        ("tests/scenes/dem_small_2d.toml", "run.steps=1000000"),
+        ("tests/scenes/hybrid_small_2d.toml", "run.steps=1000000"),
+    ];
+    for (scene, steps) in scenes {
+        let mut launcher = Running::grains(&["run", scene, "--out", out_s, "--set", steps]);
+        let err = launcher.wait_for("started as processes", Duration::from_secs(60));
+        let (run_id, dir) = (run_id(&err), run_dir(&err));
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 5 {
+            assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let line = err.lines().find(|l| l.contains("started as processes:")).expect("started line");
+        let pids: Vec<(String, i32)> = ["grains-dem", "grains-mpm", "grains-coupler", "grains-oracle"]
+            .iter()
+            .filter(|b| line.contains(&format!("{b} (pid ")))
+            .map(|b| (b.to_string(), pid_of(&err, b)))
+            .collect();
+        assert!(!pids.is_empty(), "{line}");
+        launcher.child.kill().expect("SIGKILL the launcher");
+        let killed = Instant::now();
+        let _ = launcher.child.wait();
+        while pids.iter().any(|(_, p)| !process_gone(*p)) && killed.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let took = killed.elapsed();
+        let alive: Vec<_> = pids.iter().filter(|(_, p)| !process_gone(*p)).collect();
+        for (_, p) in &alive {
+            // SAFETY: kill(2) by pid on a process this test's launcher started.
+            unsafe { libc::kill(*p, libc::SIGKILL) };
+        }
+        assert!(alive.is_empty(), "{scene}: still running 10 s after the launcher died: {alive:?}");
+        assert!(took < Duration::from_secs(2), "{scene}: the participants took {took:?} to exit after the launcher died");
+
+        // The dead launcher's node and services stay behind; the next run removes them.
+        assert!(
+            !grains_transport::ipc::run_files(&run_id).is_empty(),
+            "{scene}: the dead launcher left nothing behind (the check below would prove nothing)"
+        );
+        let (status, err) = run_to_end(&["run", "tests/scenes/synthetic_small.toml", "--out", out_s, "--quiet"]);
+        assert!(status.success(), "run after killing a launcher: {err}");
+        let left = grains_transport::ipc::run_files(&run_id);
+        assert!(left.is_empty(), "the next run left the dead run {run_id}'s files: {left:?}\n{err}");
+        assert!(err.contains(&run_id), "the next run says whose files it removed: {err}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 #[test]
 fn two_runs_at_once_do_not_interfere() {
     let _machine = machine();

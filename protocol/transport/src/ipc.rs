@@ -10,6 +10,7 @@ use crate::{Pod, ServiceSpec, TransportError, ZeroCopy};
 use iceoryx2::node::NodeView;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as ev, publish_subscribe as ps};
 use std::fmt::Debug;
@@ -21,7 +22,17 @@ type Ipc = ipc::Service;
 /// A participant's handle on the run's iceoryx2 domain.
 pub struct Iceoryx2 {
     node: Node<Ipc>,
+    /// Whether a send blocked on a full subscriber should give up (a stop was requested).
+    cancel: Cancel,
 }
+
+/// Asked while a send waits for a subscriber with a full buffer: `true` makes it fail.
+pub type Cancel = std::sync::Arc<dyn Fn() -> bool + Send + Sync>;
+
+/// How long a send waits for a subscriber whose buffer stays full before it fails. In the
+/// macro-step handshake a buffer fills only when its subscriber has stopped reading (died):
+/// without a bound, a participant whose launcher was killed would wait for it for ever.
+pub const STALLED_SUBSCRIBER: Duration = Duration::from_secs(5);
 
 fn open_err(service: &str, e: impl Debug) -> TransportError {
     TransportError::Open {
@@ -50,8 +61,9 @@ pub fn run_config(run_id: &str) -> Result<Config, TransportError> {
 
 impl Iceoryx2 {
     /// Joins the domain of `run_id` as the node `node_name` (`grains-dem`, …). Signal handling
-    /// stays with the caller: grains processes handle SIGINT/SIGTERM themselves.
-    pub fn join(run_id: &str, node_name: &str) -> Result<Self, TransportError> {
+    /// stays with the caller: grains processes handle SIGINT/SIGTERM themselves, and pass
+    /// their stop request as `cancel`, which ends a send blocked on a dead subscriber.
+    pub fn join(run_id: &str, node_name: &str, cancel: Cancel) -> Result<Self, TransportError> {
         let config = run_config(run_id)?;
         let name = NodeName::new(node_name).map_err(|e| open_err(node_name, e))?;
         let node = NodeBuilder::new()
@@ -60,7 +72,7 @@ impl Iceoryx2 {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Ipc>()
             .map_err(|e| open_err(node_name, e))?;
-        Ok(Iceoryx2 { node })
+        Ok(Iceoryx2 { node, cancel })
     }
 
     fn service_name(spec: &ServiceSpec) -> Result<ServiceName, TransportError> {
@@ -123,14 +135,24 @@ impl crate::Transport for Iceoryx2 {
             true => BackpressureStrategy::DiscardData,
             false => BackpressureStrategy::RetryUntilDelivered,
         };
-        let publisher = service
+        let mut builder = service
             .publisher_builder()
             .initial_max_slice_len(initial_len.max(1))
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .max_loaned_samples(1)
-            .backpressure_strategy(backpressure)
-            .create()
-            .map_err(|e| open_err(spec.name, e))?;
+            .backpressure_strategy(backpressure);
+        if !spec.overflow {
+            // Asked again at every retry of a blocked send (an atomic load and a clock read).
+            let cancel = self.cancel.clone();
+            builder = builder.set_backpressure_handler(move |info: &BackpressureInfo| {
+                if info.elapsed_time > STALLED_SUBSCRIBER || cancel() {
+                    BackpressureAction::DiscardDataAndFail
+                } else {
+                    BackpressureAction::Retry
+                }
+            });
+        }
+        let publisher = builder.create().map_err(|e| open_err(spec.name, e))?;
         let notifier = event.notifier_builder().create().map_err(|e| open_err(spec.name, e))?;
         Ok(IpcPublisher {
             name: spec.name,
@@ -187,7 +209,16 @@ impl<E: Pod + ZeroCopy, H: Pod + ZeroCopy> crate::Publisher<E, H> for IpcPublish
         // SAFETY: every element was initialized, see above.
         let mut sample = unsafe { sample.assume_init() };
         *sample.user_header_mut() = header;
-        sample.send().map_err(|e| io_err(self.name, e))?;
+        sample.send().map_err(|e| match e {
+            iceoryx2::port::SendError::UnableToDeliver => TransportError::Io {
+                service: self.name.into(),
+                reason: format!(
+                    "a subscriber took no message for {:.0} s (it died or stopped reading), or this participant is stopping",
+                    STALLED_SUBSCRIBER.as_secs_f64()
+                ),
+            },
+            e => io_err(self.name, e),
+        })?;
         self.notifier.notify().map_err(|e| io_err(self.name, e))?;
         Ok(())
     }
@@ -250,6 +281,59 @@ pub fn remove_run_files(run_id: &str) -> Vec<PathBuf> {
         }
     }
     removed
+}
+
+/// Removes the files of every earlier run none of whose participants is alive any more (a
+/// launcher killed with SIGKILL cleans nothing up). Returns the ids of the runs cleaned, with
+/// the paths removed. Runs with a live node are left alone, however old.
+pub fn remove_dead_runs() -> Vec<(String, Vec<PathBuf>)> {
+    let mut cleaned = Vec::new();
+    for run_id in runs_with_files() {
+        let Ok(config) = run_config(&run_id) else { continue };
+        let mut alive = false;
+        let _ = Node::<Ipc>::list(&config, |state| {
+            // Only a node known to be dead lets the run go: one that cannot be read yet may be
+            // starting.
+            if !matches!(state, NodeState::Dead(_)) {
+                alive = true;
+            }
+            CallbackProgression::Continue
+        });
+        if !alive {
+            let removed = remove_run_files(&run_id);
+            if !removed.is_empty() {
+                cleaned.push((run_id, removed));
+            }
+        }
+    }
+    cleaned
+}
+
+/// Run ids that have files in `/dev/shm` or under iceoryx2's root directory.
+fn runs_with_files() -> Vec<String> {
+    let root = Config::global_config().global.root_path().to_string();
+    let mut ids = std::collections::BTreeSet::new();
+    fn walk(dir: &std::path::Path, ids: &mut std::collections::BTreeSet<String>, depth: usize) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if let Some(id) = run_id_of(&name) {
+                ids.insert(id.to_string());
+            } else if depth > 0 && entry.path().is_dir() {
+                walk(&entry.path(), ids, depth - 1);
+            }
+        }
+    }
+    walk(std::path::Path::new("/dev/shm"), &mut ids, 0);
+    walk(std::path::Path::new(&root), &mut ids, 4);
+    ids.into_iter().collect()
+}
+
+/// The run id in a file name of a run's domain (`grains_<run-id>_…`; run ids have no `_`).
+fn run_id_of(file_name: &str) -> Option<&str> {
+    let rest = file_name.strip_prefix("grains_")?;
+    let (id, _) = rest.split_once('_')?;
+    (!id.is_empty() && grains_protocol::names::domain_prefix(id).len() < file_name.len()).then_some(id)
 }
 
 /// Every file or directory whose name carries the run's prefix, in `/dev/shm` and under

@@ -60,8 +60,8 @@ fn inproc_carries_growing_and_shrinking_messages() {
 fn iceoryx2_carries_growing_and_shrinking_messages_and_cleans_up() {
     let run_id = format!("test-roundtrip-{}", std::process::id());
     {
-        let a = ipc::Iceoryx2::join(&run_id, "grains-dem").unwrap();
-        let b = ipc::Iceoryx2::join(&run_id, "grains-coupler").unwrap();
+        let a = ipc::Iceoryx2::join(&run_id, "grains-dem", std::sync::Arc::new(|| false)).unwrap();
+        let b = ipc::Iceoryx2::join(&run_id, "grains-coupler", std::sync::Arc::new(|| false)).unwrap();
         assert!(!ipc::run_files(&run_id).is_empty(), "a live run has files under its prefix");
         exchange(&a, &b);
         assert!(a.dead_peers().is_empty());

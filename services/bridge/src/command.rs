@@ -79,7 +79,11 @@ pub fn parse(payload: &[u8], walls: usize) -> Result<Checked, String> {
         .and_then(serde_json::Value::as_f64)
         .ok_or_else(|| format!("set {}: \"value\" must be a number in [{min}, {max}] {unit}", p.name()))?;
     if !(min..=max).contains(&value) {
-        return Err(format!("set {}: {value} is outside [{min}, {max}] {unit}", p.name()));
+        return Err(format!(
+            "set {}: {} is outside [{min}, {max}] {unit}",
+            p.name(),
+            grains_protocol::number(value)
+        ));
     }
     Ok(Checked {
         command,
@@ -104,7 +108,7 @@ mod tests {
 
     #[test]
     fn bad_commands_say_why() {
-        let cases: [(&[u8], &str); 12] = [
+        let cases: [(&[u8], &str); 13] = [
             (b"", "not a command"),
             (b"pause", "not a command"),
             (b"\xff\xfe", "not UTF-8"),
@@ -115,6 +119,7 @@ mod tests {
             (br#"{"command":"set","key":"dt","value":1}"#, "\"dt\" is not settable"),
             (br#"{"command":"set","key":"gravity.y","value":"x"}"#, "must be a number"),
             (br#"{"command":"set","key":"gravity.y","value":1e9}"#, "outside [-100, 100]"),
+            (br#"{"command":"set","key":"gravity.y","value":1e308}"#, "set gravity.y: 1e308 is outside"),
             (br#"{"command":"set","key":"wall.2.velocity.x","value":1}"#, "not settable"),
             (
                 br#"{"command":"set","key":"wall.0.velocity.x","value":11}"#,

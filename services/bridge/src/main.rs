@@ -32,8 +32,8 @@ fn main() -> ExitCode {
         if let Some(name) = &cli.scene_name {
             scene.name = name.clone();
         }
-        let transport = grains_transport::ipc::Iceoryx2::join(&cli.run_id, grains_protocol::Role::Bridge.binary())?;
         let stop = grains_service::signals::StopFlag::with_signals();
+        let transport = grains_transport::ipc::Iceoryx2::join(&cli.run_id, grains_protocol::Role::Bridge.binary(), stop.as_cancel())?;
         grains_bridge::serve(&transport, &cfg, &cli.run_id, &scene, cli.out_dir.as_deref(), &stop)
     };
     match run() {

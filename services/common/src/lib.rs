@@ -53,10 +53,11 @@ pub fn participant_main(
 ) -> std::process::ExitCode {
     let run = || -> anyhow::Result<()> {
         let scene = grains_protocol::scene::load(&args.scene)?;
-        let transport = grains_transport::ipc::Iceoryx2::join(&args.run_id, role.binary())?;
+        let stop = signals::StopFlag::with_signals();
+        let transport = grains_transport::ipc::Iceoryx2::join(&args.run_id, role.binary(), stop.as_cancel())?;
         let opts = solver::ParticipantOptions {
             run_id: args.run_id.clone(),
-            stop: signals::StopFlag::with_signals(),
+            stop,
             connect_timeout: args.connect_timeout(),
             protocol_version: args.claim_protocol_version.unwrap_or(grains_protocol::PROTOCOL_VERSION),
             checksums: scene.synthetic.as_ref().is_none_or(|s| s.checksum),

@@ -30,6 +30,8 @@ pub struct Session<'t, T: Transport> {
     hello: T::Publisher<Hello, ()>,
     welcome: T::Subscriber<Welcome, ()>,
     polls: std::cell::Cell<u32>,
+    /// When [`Session::check_between_steps`] last looked for dead peers.
+    last_dead_check: std::cell::Cell<Instant>,
 }
 
 impl<'t, T: Transport> Session<'t, T> {
@@ -59,6 +61,7 @@ impl<'t, T: Transport> Session<'t, T> {
             hello,
             welcome,
             polls: std::cell::Cell::new(0),
+            last_dead_check: std::cell::Cell::new(Instant::now()),
         };
         let launcher = format!("the launcher of run {run_id}");
         session.wait_until(&launcher, |s| s.welcome.publisher_count() >= 1 && s.hello.subscriber_count() >= 1)?;
@@ -68,6 +71,25 @@ impl<'t, T: Transport> Session<'t, T> {
             bail!(Halt::Refused(refusal(&verdict, role, protocol_version, scene_hash)));
         }
         Ok(session)
+    }
+
+    /// A session that skipped admission (unit tests of what happens after it).
+    #[cfg(test)]
+    pub(crate) fn unadmitted(transport: &'t T, role: Role, run_id: &str) -> anyhow::Result<Self> {
+        Ok(Session {
+            transport,
+            role,
+            run_id: run_id.to_string(),
+            run_id_bytes: run_id_bytes(run_id),
+            scene_hash: 0,
+            stop: StopFlag::manual(),
+            connect_timeout: None,
+            protocol_version: PROTOCOL_VERSION,
+            hello: transport.publisher::<Hello, ()>(&names::HELLO, 1)?,
+            welcome: transport.subscriber::<Welcome, ()>(&names::WELCOME)?,
+            polls: std::cell::Cell::new(0),
+            last_dead_check: std::cell::Cell::new(Instant::now()),
+        })
     }
 
     /// Tells the launcher that every port is connected, then waits until all participants
@@ -152,6 +174,20 @@ impl<'t, T: Transport> Session<'t, T> {
         self.polls.set(self.polls.get() + 1);
         if self.polls.get().is_multiple_of(DEAD_CHECK_EVERY) {
             self.check_dead(waiting_for)?;
+        }
+        Ok(())
+    }
+
+    /// For a participant that steps without waiting on anyone (a solver alone in its run):
+    /// stop requests at every step, dead peers (the launcher among them) every few hundred
+    /// milliseconds, so that it never outlives its run.
+    pub fn check_between_steps(&self) -> anyhow::Result<()> {
+        if self.stop.is_set() {
+            bail!(Halt::Interrupted);
+        }
+        if self.last_dead_check.get().elapsed() >= POLL * DEAD_CHECK_EVERY {
+            self.last_dead_check.set(Instant::now());
+            self.check_dead("its next step")?;
         }
         Ok(())
     }

@@ -58,4 +58,11 @@ impl StopFlag {
     pub fn is_set(&self) -> bool {
         self.own.load(Ordering::SeqCst) || (self.follow_signals && signalled())
     }
+
+    /// The flag as the iceoryx2 transport asks it while a send is blocked on a full
+    /// subscriber: a stop request ends the wait.
+    pub fn as_cancel(&self) -> grains_transport::ipc::Cancel {
+        let flag = self.clone();
+        std::sync::Arc::new(move || flag.is_set())
+    }
 }

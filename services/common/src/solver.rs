@@ -2,7 +2,6 @@
 //! [`Solver`] trait, and the time-owner helpers (control commands) that a solver running
 //! alone shares with the coupler.
 
-use crate::Halt;
 use crate::session::Session;
 use crate::zones::ZoneField;
 use anyhow::bail;
@@ -431,8 +430,14 @@ pub fn next_step<T: Transport>(
     session: &Session<'_, T>,
     step_sub: &mut T::Subscriber<StepBegin, StepHeader>,
 ) -> anyhow::Result<Option<StepWindow>> {
-    let (h, b) = session.recv(step_sub, "the next step", |h, b| (*h, b.first().copied().unwrap_or_default()))?;
-    session.check_message::<StepBegin>(&names::STEP_BEGIN, &h, h.step, &[])?;
+    let (h, b) = session.recv(step_sub, "the next step", |h, b| -> anyhow::Result<(StepHeader, StepBegin)> {
+        session.check_message(&names::STEP_BEGIN, h, h.step, b)?;
+        let begin = b
+            .first()
+            .copied()
+            .ok_or_else(|| anyhow::anyhow!("{}: step {}: an empty message (one StepBegin expected)", names::STEP_BEGIN.name, h.step))?;
+        Ok((*h, begin))
+    })??;
     Ok((b.flags & STEP_STOP == 0).then_some(StepWindow {
         step: h.step,
         time: h.time,
@@ -459,6 +464,7 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
         if !go_on {
             break;
         }
+        session.check_between_steps()?;
         let window = StepWindow::of(scene, step);
         let t = Instant::now();
         solver.step_alone(&window)?;
@@ -572,10 +578,38 @@ impl<T: Transport> RunClock<T> {
     }
 }
 
-/// Stops with [`Halt::Interrupted`] when the session's stop flag is set.
-pub fn check_stop<T: Transport>(session: &Session<'_, T>) -> anyhow::Result<()> {
-    if session.stop.is_set() {
-        bail!(Halt::Interrupted);
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use grains_transport::inproc::InProc;
+
+    /// Issue 20: a step begin whose header carries the checksum of its payload (as the spec
+    /// allows every sender to) is accepted, one with a wrong checksum is refused. The solvers
+    /// used to check the checksum against an empty payload, so only a 0 got through.
+    #[test]
+    fn a_step_begin_with_its_checksum_is_accepted_and_a_wrong_one_refused() {
+        let bus = InProc::new();
+        let session = Session::unadmitted(&bus, Role::Dem, "test-run").unwrap();
+        let mut step_pub = bus.publisher::<StepBegin, StepHeader>(&names::STEP_BEGIN, 1).unwrap();
+        let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN).unwrap();
+        let begin = StepBegin { flags: 0, substeps: 7 };
+        let mut send = |step: u64, checksum: Option<u64>| {
+            let header = session.header(step, 0.5, 1e-3);
+            step_pub
+                .publish(1, |h, out| {
+                    out[0] = begin;
+                    *h = header;
+                    h.sender = Role::Coupler as u32;
+                    h.checksum = checksum.unwrap_or_else(|| checksum_bytes(as_bytes(out)));
+                })
+                .unwrap();
+        };
+        send(3, None);
+        let window = next_step(&session, &mut step_sub).unwrap().expect("a step, not a stop");
+        assert_eq!((window.step, window.substeps), (3, 7));
+        assert_ne!(checksum_bytes(as_bytes(&[begin])), 0, "the test must send a non-zero checksum");
+        send(4, Some(0x1234));
+        let err = next_step(&session, &mut step_sub).unwrap_err().to_string();
+        assert!(err.contains("checksum"), "{err}");
     }
-    Ok(())
 }

@@ -73,6 +73,9 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
                 flags: 0,
                 substeps: window.substeps,
             };
+            if opts.checksums {
+                h.checksum = checksum_bytes(as_bytes(out));
+            }
         })?;
 
         let wait_start = Instant::now();
