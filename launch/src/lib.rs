@@ -1,24 +1,24 @@
-//! The `grains` command as a library: [`run`] (one run from scene to outputs, over processes
-//! or threads), [`participants`] (children and threads behind one trait), [`outputs`]
-//! (metrics and summary, atomic), [`bridge`] (the optional zenoh bridge of a run), [`bench`]
-//! (transport benchmarks).
+//! The `grains` command as a library, by what a reader comes for:
+//!
+//! - [`run`]: one run from scene to outputs, over processes or threads (participants,
+//!   admission, supervision, the bridge of a run, progress, outputs);
+//! - [`metrics`]: `metrics.csv`, written and read back in one place;
+//! - [`validate`]: `grains validate`, its registry of parts and the report they write
+//!   ([`report`]: markdown, checks and charts);
+//! - [`bench`]: `grains bench`, figures measured side by side;
+//! - [`pack`], [`remote`], [`clock`]: `grains pack`, the remote clients' glue, calendar dates.
+//!
+//! Nothing here depends on what depends on it: `validate` and `bench` use `run`, never the
+//! other way round.
 
 pub mod bench;
-pub mod bench_dem;
-pub mod bench_hybrid;
-pub mod bench_mpm;
-pub mod bridge;
-pub mod chart;
-pub mod outputs;
+pub mod clock;
+pub mod metrics;
 pub mod pack;
-pub mod participants;
+pub mod remote;
 pub mod report;
 pub mod run;
 pub mod validate;
-pub mod validate_cost;
-pub mod validate_drum;
-pub mod validate_silo;
-pub mod validate_stability;
 
 /// Exit code for an error of `grains`: 2 for bad input (scene, flags), 1 otherwise.
 pub fn exit_code(err: &anyhow::Error) -> u8 {

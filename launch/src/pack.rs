@@ -51,8 +51,8 @@ fn pack_in<S: Space>(scene: &Scene, args: &PackArgs) -> anyhow::Result<()> {
     let dt = grains_dem_service::setup::dem_dt(scene);
     let per_step = scene.coupling.substeps as usize;
     let t0 = Instant::now();
-    eprintln!(
-        "grains pack: {} grains, {} steps of {dt:.3e} s",
+    tracing::info!(
+        "pack: {} grains, {} steps of {dt:.3e} s",
         state.grains.len(),
         scene.steps * per_step as u64
     );
@@ -62,8 +62,8 @@ fn pack_in<S: Space>(scene: &Scene, args: &PackArgs) -> anyhow::Result<()> {
             bail!("grain {id} is not finite at macro-step {step}: the settling blew up");
         }
         if step % (scene.steps / 20).max(1) == 0 || step == scene.steps {
-            eprintln!(
-                "grains pack: step {step}/{} | t = {:.4} s | kinetic energy {:.3e} J | {:.0} s",
+            tracing::info!(
+                "pack: step {step}/{} | t = {:.4} s | kinetic energy {:.3e} J | {:.0} s",
                 scene.steps,
                 state.time,
                 DemPipeline::kinetic_energy(&state),
@@ -94,6 +94,6 @@ fn pack_in<S: Space>(scene: &Scene, args: &PackArgs) -> anyhow::Result<()> {
     let title = format!("grains pack of {} (settled {:.3} s)", scene.path.display(), state.time);
     grains_dem_service::lammps_data::write(&args.out, &DataFile { bounds, atoms }, &title)
         .with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!("grains pack: {} grains written to {}", g.len(), args.out.display());
+    tracing::info!("pack: {} grains written to {}", g.len(), args.out.display());
     Ok(())
 }

@@ -23,7 +23,7 @@ pub fn repo() -> PathBuf {
 }
 
 pub fn bin(name: &str) -> PathBuf {
-    grains_launch::participants::bin_dir().join(name)
+    grains_launch::run::participants::bin_dir().join(name)
 }
 
 /// A fresh output directory for one test.
@@ -128,16 +128,20 @@ impl Drop for Running {
     }
 }
 
-/// The run id from the launcher's first line ("grains: run <id> of scene ...").
+/// The launcher's line that announces the run ("grains INFO: run <id> of scene ...").
+fn run_line(stderr: &str) -> &str {
+    let at = |l: &&str| l.starts_with("grains INFO: run ") && l.contains(" of scene ");
+    stderr.lines().find(at).expect("run line")
+}
+
+/// The run id from the launcher's first line.
 pub fn run_id(stderr: &str) -> String {
-    let line = stderr.lines().find(|l| l.starts_with("grains: run ")).expect("run line");
-    line.split_whitespace().nth(2).expect("run id").to_string()
+    run_line(stderr).split_whitespace().nth(3).expect("run id").to_string()
 }
 
 /// The output directory of a run from the launcher's first line.
 pub fn run_dir(stderr: &str) -> PathBuf {
-    let line = stderr.lines().find(|l| l.starts_with("grains: run ")).expect("run line");
-    PathBuf::from(line.rsplit("output in ").next().expect("output dir").trim())
+    PathBuf::from(run_line(stderr).rsplit("output in ").next().expect("output dir").trim())
 }
 
 /// pid of a participant from the launcher's "started as processes: ..." line.
@@ -150,19 +154,101 @@ pub fn pid_of(stderr: &str, binary: &str) -> i32 {
     rest[..rest.find(')').expect(")")].parse().expect("pid")
 }
 
-/// Rows of a metrics file (without the header).
-pub fn metrics_rows(dir: &Path) -> Vec<Vec<String>> {
-    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-    text.lines().skip(1).map(|l| l.split(',').map(str::to_string).collect()).collect()
+/// A run's `metrics.csv`, by column name (the launcher's own reader: a missing column fails).
+pub fn metrics(dir: &Path) -> grains_launch::metrics::MetricsTable {
+    grains_launch::metrics::MetricsTable::read(dir).unwrap_or_else(|e| panic!("{e:#}"))
 }
 
+/// Column `name` of a run's metrics, as written.
 pub fn column(dir: &Path, name: &str) -> Vec<String> {
-    let text = std::fs::read_to_string(dir.join("metrics.csv")).expect("metrics");
-    let header: Vec<&str> = text.lines().next().expect("header").split(',').collect();
-    let k = header.iter().position(|c| *c == name).unwrap_or_else(|| panic!("no column {name}"));
-    metrics_rows(dir).into_iter().map(|r| r[k].clone()).collect()
+    metrics(dir).text(name).unwrap_or_else(|e| panic!("{e:#}")).to_vec()
+}
+
+/// Column `name` of a run's metrics, as numbers.
+pub fn values(dir: &Path, name: &str) -> Vec<f64> {
+    metrics(dir).column(name).unwrap_or_else(|e| panic!("{e:#}"))
 }
 
 pub fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary.json")).expect("json")
+}
+
+/// The Python interpreter the test clients in `tests/python/` run with: `GRAINS_PYTHON` if
+/// set, else a venv the harness makes once, under the target directory, with the packages of
+/// `tests/python/requirements.txt` from PyPI (a fresh machine has Python but not them). A test
+/// that needs it fails at once, with the reason, when it cannot be had.
+pub fn python() -> PathBuf {
+    static PYTHON: std::sync::OnceLock<Result<PathBuf, String>> = std::sync::OnceLock::new();
+    PYTHON
+        .get_or_init(|| match std::env::var_os("GRAINS_PYTHON") {
+            Some(p) => Ok(PathBuf::from(p)),
+            None => test_venv(),
+        })
+        .clone()
+        .unwrap_or_else(|why| panic!("no Python for the test clients: {why}"))
+}
+
+/// Makes (or reuses) `<target>/test-python`; one process at a time (a lock file).
+fn test_venv() -> Result<PathBuf, String> {
+    let bins = grains_launch::run::participants::bin_dir();
+    let target = bins.parent().unwrap_or(&bins).to_path_buf();
+    let venv = target.join("test-python");
+    let python = venv.join("bin/python");
+    let requirements = repo().join("tests/python/requirements.txt");
+    let _lock = FileLock::take(&target.join("test-python.lock"))?;
+    let wanted = std::fs::read_to_string(&requirements).map_err(|e| format!("{}: {e}", requirements.display()))?;
+    let stamp = venv.join("requirements.installed");
+    if python.exists() && std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted) {
+        return Ok(python);
+    }
+    let run = |cmd: &mut Command, what: &str| -> Result<(), String> {
+        let out = cmd
+            .output()
+            .map_err(|e| format!("{what}: cannot start {:?}: {e}", cmd.get_program()))?;
+        if out.status.success() {
+            Ok(())
+        } else {
+            Err(format!(
+                "{what} failed ({}): {}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr).trim()
+            ))
+        }
+    };
+    eprintln!("tests: making the Python venv {} (once)", venv.display());
+    run(
+        Command::new("python3").args(["-m", "venv", "--clear"]).arg(&venv),
+        "python3 -m venv",
+    )?;
+    run(
+        Command::new(&python)
+            .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r"])
+            .arg(&requirements),
+        "pip install -r tests/python/requirements.txt",
+    )?;
+    std::fs::write(&stamp, wanted).map_err(|e| format!("{}: {e}", stamp.display()))?;
+    Ok(python)
+}
+
+/// An exclusive lock on a file (flock), released when dropped.
+struct FileLock(std::fs::File);
+
+impl FileLock {
+    fn take(path: &Path) -> Result<Self, String> {
+        let f = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        use std::os::fd::AsRawFd;
+        // SAFETY: flock on a file descriptor this struct owns.
+        if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX) } != 0 {
+            return Err(format!("cannot lock {}", path.display()));
+        }
+        Ok(FileLock(f))
+    }
+}
+
+impl Drop for FileLock {
+    fn drop(&mut self) {
+        use std::os::fd::AsRawFd;
+        // SAFETY: unlocks the descriptor this struct owns.
+        unsafe { libc::flock(self.0.as_raw_fd(), libc::LOCK_UN) };
+    }
 }

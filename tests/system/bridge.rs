@@ -57,10 +57,9 @@ fn wait_reachable(ep: &Endpoint, run: &str, launcher: &Running) -> u64 {
     }
 }
 
-/// One of the Python clients in `tests/python/` (with `GRAINS_PYTHON`, default `python3`).
-fn python(script: &str, args: &[&str]) -> std::process::Command {
-    let python = std::env::var("GRAINS_PYTHON").unwrap_or_else(|_| "python3".into());
-    let mut cmd = std::process::Command::new(python);
+/// One of the Python clients in `tests/python/`, with the harness's Python ([`python`]).
+fn client(script: &str, args: &[&str]) -> std::process::Command {
+    let mut cmd = std::process::Command::new(grains_system_tests::python());
     cmd.arg(repo().join("tests/python").join(script)).args(args);
     cmd
 }
@@ -73,13 +72,15 @@ fn bridge_pid(stderr: &str) -> i32 {
 
 #[test]
 fn a_python_client_watches_pauses_resumes_and_stops_a_run() {
+    // The clients' Python first: if it cannot be had, fail before any run starts.
+    grains_system_tests::python();
     let _machine = machine();
     let out = out_dir("bridge-python");
     let connect = free_endpoint();
     let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", FOREVER, "--set", NO_FRAMES]);
     wait_reachable(&endpoint(&connect, None), &run, &launcher);
 
-    let client = python("bridge_client.py", &[&connect, &run])
+    let client = client("bridge_client.py", &[&connect, &run])
         .output()
         .unwrap_or_else(|e| panic!("cannot start Python: {e}"));
     let said = String::from_utf8_lossy(&client.stdout).into_owned();
@@ -97,7 +98,7 @@ fn a_python_client_watches_pauses_resumes_and_stops_a_run() {
     let s = summary(&dir);
     assert_eq!(s["status"], "stopped", "{s}");
     assert_eq!(s["steps_completed"], last["stopped_at"], "{s}");
-    assert_eq!(metrics_rows(&dir).len() as u64, last["stopped_at"].as_u64().unwrap());
+    assert_eq!(metrics(&dir).len() as u64, last["stopped_at"].as_u64().unwrap());
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -125,7 +126,7 @@ fn refused_and_malformed_commands_change_nothing() {
     };
     assert!(status.success(), "{err}");
     let physics =
-        |dir: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
+        |dir: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
     let reference = physics(&run_dir(&err));
 
     // Steering off: every command, well-formed or not, is refused.
@@ -222,11 +223,11 @@ fn killing_the_bridge_does_not_stop_the_run() {
     let err = launcher.stderr();
     assert!(status.success(), "{err}");
     assert!(
-        err.contains("warning: the bridge") && err.contains("resuming"),
+        err.contains("WARN: the bridge") && err.contains("resuming"),
         "the launcher must warn and resume: {err}"
     );
     assert_eq!(summary(&dir)["status"], "completed");
-    assert_eq!(metrics_rows(&dir).len(), steps);
+    assert_eq!(metrics(&dir).len(), steps);
     let left = grains_transport::ipc::run_files(&run);
     assert!(left.is_empty(), "files of run {run} left: {left:?}");
     std::fs::remove_dir_all(&out).unwrap();
@@ -236,6 +237,8 @@ fn killing_the_bridge_does_not_stop_the_run() {
 /// commands go nowhere; a steerer's command works.
 #[test]
 fn access_control_lets_in_only_the_listed_users() {
+    // The clients' Python first: if it cannot be had, fail before any run starts.
+    grains_system_tests::python();
     let _machine = machine();
     let out = out_dir("bridge-acl");
     let connect = free_endpoint();
@@ -267,7 +270,7 @@ fn access_control_lets_in_only_the_listed_users() {
     }
     // A reader cannot publish to the other clients: a steerer listening to the summaries
     // gets real ones and none of the reader's fakes (tests/python/reader_injects.py).
-    let inject = python("reader_injects.py", &[&connect, &run, "viewer:look", "pilot:fly"])
+    let inject = client("reader_injects.py", &[&connect, &run, "viewer:look", "pilot:fly"])
         .output()
         .unwrap_or_else(|e| panic!("cannot start Python: {e}"));
     let said = String::from_utf8_lossy(&inject.stdout).into_owned() + &String::from_utf8_lossy(&inject.stderr);
@@ -413,6 +416,8 @@ fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
 /// shared: the fastest run is the least disturbed).
 #[test]
 fn a_client_that_never_reads_views_does_not_slow_the_run() {
+    // The clients' Python first: if it cannot be had, fail before any run starts.
+    grains_system_tests::python();
     use std::io::BufRead;
     let _machine = machine();
     let out = out_dir("bridge-slow");
@@ -437,7 +442,7 @@ fn a_client_that_never_reads_views_does_not_slow_the_run() {
         let (mut launcher, run, dir) = bridged(&out, &connect, &big);
         wait_reachable(&endpoint(&connect, None), &run, &launcher);
         let viewer = stalled.then(|| {
-            let mut child = python("stalled_viewer.py", &[&connect, &run])
+            let mut child = client("stalled_viewer.py", &[&connect, &run])
                 .stdout(std::process::Stdio::piped())
                 .spawn()
                 .unwrap_or_else(|e| panic!("cannot start Python: {e}"));

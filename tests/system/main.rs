@@ -43,8 +43,7 @@ fn processes_exchange_million_node_rasters_and_inproc_gives_the_same_metrics() {
     assert_eq!(distinct.len(), 3, "participants must be separate processes: {pids:?}");
 
     // 200 macro-steps, each raster at least 1,000,000 nodes, each checked by its receiver.
-    let rows = metrics_rows(&ipc_dir);
-    assert_eq!(rows.len(), 200);
+    assert_eq!(metrics(&ipc_dir).len(), 200);
     for role in ["dem", "mpm"] {
         let nodes: Vec<u64> = column(&ipc_dir, &format!("{role}_nodes"))
             .iter()
@@ -72,8 +71,8 @@ fn processes_exchange_million_node_rasters_and_inproc_gives_the_same_metrics() {
     let a = std::fs::read_to_string(ipc_dir.join("metrics.csv")).unwrap();
     let b = std::fs::read_to_string(inproc_dir.join("metrics.csv")).unwrap();
     let (a, b) = (
-        grains_launch::outputs::physics_columns(&a),
-        grains_launch::outputs::physics_columns(&b),
+        grains_launch::metrics::physics_columns(&a),
+        grains_launch::metrics::physics_columns(&b),
     );
     assert!(a.lines().count() == 201 && a == b, "metrics differ between transports");
     std::fs::remove_dir_all(&out).unwrap();
@@ -107,7 +106,7 @@ fn killing_any_participant_ends_the_run_within_2_s_and_leaves_nothing() {
             took < Duration::from_secs(2),
             "launcher took {took:?} to notice {victim}'s death: {err}"
         );
-        let named = err.lines().any(|l| l.contains("error") && l.contains(victim));
+        let named = err.lines().any(|l| l.contains("ERROR") && l.contains(victim));
         assert!(named, "the error must name {victim}: {err}");
         let left = grains_transport::ipc::run_files(&run_id);
         assert!(left.is_empty(), "files of run {run_id} left after killing {victim}: {left:?}");
@@ -170,7 +169,10 @@ fn killing_the_launcher_stops_its_participants_within_2_s_and_the_next_run_clean
             unsafe { libc::kill(*p, libc::SIGKILL) };
         }
         assert!(alive.is_empty(), "{scene}: still running 10 s after the launcher died: {alive:?}");
-        assert!(took < Duration::from_secs(2), "{scene}: the participants took {took:?} to exit after the launcher died");
+        assert!(
+            took < Duration::from_secs(2),
+            "{scene}: the participants took {took:?} to exit after the launcher died"
+        );
 
         // The dead launcher's node and services stay behind; the next run removes them.
         assert!(
@@ -183,6 +185,21 @@ fn killing_the_launcher_stops_its_participants_within_2_s_and_the_next_run_clean
         assert!(left.is_empty(), "the next run left the dead run {run_id}'s files: {left:?}\n{err}");
         assert!(err.contains(&run_id), "the next run says whose files it removed: {err}");
     }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// The example scene of `scenes/README.md` (its first `toml` block) is a scene `grains check`
+/// accepts: the documentation's example works as written.
+#[test]
+fn the_scene_reference_example_passes_grains_check() {
+    let readme = std::fs::read_to_string(repo().join("scenes/README.md")).unwrap();
+    let start = readme.find("```toml\n").expect("a toml block") + "```toml\n".len();
+    let example = &readme[start..start + readme[start..].find("```").expect("end of the block")];
+    let out = out_dir("readme-example");
+    let path = out.join("example.toml");
+    std::fs::write(&path, example).unwrap();
+    let (status, err) = run_to_end(&["check", path.to_str().unwrap()]);
+    assert!(status.success(), "scenes/README.md's example is refused:\n{err}");
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -200,8 +217,8 @@ fn two_runs_at_once_do_not_interfere() {
     let (da, db) = (run_dir(&a.stderr()), run_dir(&b.stderr()));
     assert_ne!(da, db);
     // Same scene, so the same physics: anything crossing between the runs would show here.
-    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(metrics_rows(&da).len(), 60);
+    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(metrics(&da).len(), 60);
     assert_eq!(read(&da), read(&db));
     std::fs::remove_dir_all(&out).unwrap();
 }
@@ -275,7 +292,7 @@ fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
     let status = launcher.wait_exit(LONG);
     assert!(status.success(), "{}", launcher.stderr());
     let dir = run_dir(&launcher.stderr());
-    assert_eq!(metrics_rows(&dir).len(), 60);
+    assert_eq!(metrics(&dir).len(), 60);
     let parts = summary(&dir)["participants"].clone();
     assert!(
         parts
@@ -310,7 +327,7 @@ fn ctrl_c_stops_every_participant_cleanly_and_keeps_the_outputs() {
     for p in summary["participants"].as_array().unwrap() {
         assert_eq!(p["exit"], "exited with code 0", "{summary}");
     }
-    let rows = metrics_rows(&dir).len() as u64;
+    let rows = metrics(&dir).len() as u64;
     assert!(
         rows >= 20 && rows == summary["steps_completed"].as_u64().unwrap(),
         "{rows} rows, {summary}"
@@ -334,23 +351,29 @@ fn a_dem_scene_starts_only_the_dem_and_threads_give_the_same_physics() {
     // Frames at steps 0, 20 and 40, listed in the ParaView collection, one point per grain.
     let grains: u64 = column(&dir, "dem_items")[0].parse().unwrap();
     assert!(grains > 200, "{grains} grains");
-    let pvd = std::fs::read_to_string(dir.join("frames/grains.pvd")).unwrap();
-    assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
-    let vtu = std::fs::read_to_string(dir.join("frames/grains_00000040.vtu")).unwrap();
-    assert!(vtu.contains(&format!("NumberOfPoints=\"{grains}\"")) && vtu.trim_end().ends_with("</VTKFile>"));
-    for name in ["\"id\"", "\"radius\"", "\"velocity\"", "\"angular_velocity\"", "\"contacts\""] {
-        assert!(vtu.contains(name), "frame lacks {name}");
+    let listed = grains_service::vtu::collection(&dir.join("frames/grains.pvd")).unwrap();
+    let times: Vec<f64> = listed.iter().map(|(t, _)| *t).collect();
+    assert_eq!(
+        times,
+        [0.0, 20.0 * 5e-5, 40.0 * 5e-5],
+        "frames at steps 0, 20, 40 at their exact times"
+    );
+    let frame = grains_service::vtu::Frame::read(&listed[2].1).unwrap();
+    assert_eq!(frame.points.len() as u64, grains);
+    for (name, per_grain) in [("id", 1), ("radius", 1), ("velocity", 3), ("angular_velocity", 3), ("contacts", 1)] {
+        let a = frame.array(name).unwrap_or_else(|| panic!("frame lacks {name}"));
+        assert_eq!(a.len() as u64, per_grain * grains, "{name}");
     }
     // The walls' loads: one row per macro-step.
     let walls = std::fs::read_to_string(dir.join("walls.csv")).unwrap();
     assert_eq!(walls.lines().count(), 41, "header + 40 steps");
     // Settling under gravity: the grains gain downward momentum from rest.
-    let py: Vec<f64> = column(&dir, "dem_py").iter().map(|v| v.parse().unwrap()).collect();
+    let py = values(&dir, "dem_py");
     assert!(py[5] < 0.0, "{py:?}");
 
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
     assert_eq!(read(&dir), read(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
@@ -389,26 +412,27 @@ fn an_mpm_scene_starts_only_the_mpm_writes_point_frames_and_threads_give_the_sam
     // 10 × 20 cells of 2 × 2 points.
     let points: u64 = column(&dir, "mpm_items")[0].parse().unwrap();
     assert_eq!(points, 800);
-    let pvd = std::fs::read_to_string(dir.join("frames/points.pvd")).unwrap();
-    assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
-    let vtu = std::fs::read_to_string(dir.join("frames/points_00000040.vtu")).unwrap();
-    assert!(vtu.contains(&format!("NumberOfPoints=\"{points}\"")) && vtu.trim_end().ends_with("</VTKFile>"));
-    for name in [
-        "\"velocity\"",
-        "\"pressure\"",
-        "\"plastic_strain\"",
-        "\"plastic_strain_rate\"",
-        "\"packing_fraction\"",
+    let listed = grains_service::vtu::collection(&dir.join("frames/points.pvd")).unwrap();
+    assert_eq!(listed.len(), 3, "{listed:?}");
+    let frame = grains_service::vtu::Frame::read(&listed[2].1).unwrap();
+    assert_eq!(frame.points.len() as u64, points);
+    for (name, per_point) in [
+        ("velocity", 3),
+        ("pressure", 1),
+        ("plastic_strain", 1),
+        ("plastic_strain_rate", 1),
+        ("packing_fraction", 1),
     ] {
-        assert!(vtu.contains(name), "frame lacks {name}");
+        let a = frame.array(name).unwrap_or_else(|| panic!("frame lacks {name}"));
+        assert_eq!(a.len() as u64, per_point * points, "{name}");
     }
     // Falling under gravity: the points gain downward momentum from rest.
-    let py: Vec<f64> = column(&dir, "mpm_py").iter().map(|v| v.parse().unwrap()).collect();
+    let py = values(&dir, "mpm_py");
     assert!(py[5] < 0.0 && py[20] < py[5], "{py:?}");
 
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
     assert_eq!(read(&dir), read(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
@@ -472,7 +496,7 @@ fn a_hybrid_scene_runs_coupled_and_processes_match_threads() {
     }
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::outputs::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
     assert_eq!(read(&dir), read(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
@@ -856,16 +880,8 @@ fn a_packing_from_grains_pack_is_reused_by_a_scene() {
         .take(2)
         .map(|v| v.parse().unwrap())
         .collect();
-    let frame = std::fs::read_to_string(dir.join("frames/grains_00000000.vtu")).unwrap();
-    let first: Vec<f64> = frame
-        .lines()
-        .skip_while(|l| !l.contains("<Points>"))
-        .nth(2)
-        .unwrap()
-        .split_whitespace()
-        .take(2)
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let frame = grains_service::vtu::Frame::read(&dir.join("frames/grains_00000000.vtu")).unwrap();
+    let first = frame.points[0];
     assert!(
         (atom[0] - first[0]).abs() < 1e-12 && (atom[1] - first[1]).abs() < 1e-12,
         "{atom:?} vs {first:?}"
@@ -980,7 +996,7 @@ fn killing_the_oracle_ends_a_hybrid_run_within_2_s() {
     let (took, err) = (killed.elapsed(), launcher.stderr());
     assert_eq!(status.code(), Some(1), "{err}");
     assert!(took < Duration::from_secs(2), "the launcher took {took:?}: {err}");
-    assert!(err.lines().any(|l| l.contains("error") && l.contains("grains-oracle")), "{err}");
+    assert!(err.lines().any(|l| l.contains("ERROR") && l.contains("grains-oracle")), "{err}");
     let left = grains_transport::ipc::run_files(&run_id);
     assert!(left.is_empty(), "files of run {run_id} left: {left:?}");
     std::fs::remove_dir_all(&out).unwrap();

@@ -7,10 +7,6 @@ use grains_protocol::wire::Zone;
 
 const SCENE: &str = "tests/scenes/hybrid_adaptive_2d.toml";
 
-fn f(v: &str) -> f64 {
-    v.parse().unwrap()
-}
-
 /// Every epoch of the adaptive pile (10 epochs in 1000 steps, the first ones converting a
 /// row of cells each way as the band moves to where the grains' surface is): the total mass
 /// after the epoch (the solvers' summaries) within 1% of before (the oracle's), the total
@@ -29,7 +25,7 @@ fn adaptive_epochs_keep_mass_and_momentum() {
     assert!(status.success(), "{err}");
     let b = std::fs::read_to_string(run_dir(&err).join("metrics.csv")).unwrap();
     assert!(
-        grains_launch::outputs::physics_columns(&text) == grains_launch::outputs::physics_columns(&b),
+        grains_launch::metrics::physics_columns(&text) == grains_launch::metrics::physics_columns(&b),
         "adaptive epochs differ between processes and threads"
     );
     // The layered mode (depth below the top of each column, Yue 2018 §4.3) keeps them too.
@@ -42,42 +38,42 @@ fn adaptive_epochs_keep_mass_and_momentum() {
 /// Every epoch of a run keeps mass within 1% and momentum within 1% of max(|p|, m √(g d));
 /// 10 epochs, at least 2 converting something. Returns the run's metrics.csv.
 fn check_epochs(dir: &std::path::Path) -> String {
-    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
-    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
-    let k = |name: &str| header.iter().position(|c| *c == name).unwrap();
-    let rows = metrics_rows(dir);
+    let t = metrics(dir);
+    let col = |name: &str| t.column(name).unwrap_or_else(|e| panic!("{e:#}"));
+    let (step, before, dem_mass, mpm_mass) = (col("step"), col("oracle_mass"), col("dem_mass"), col("mpm_mass"));
+    let (dem_items, mpm_items) = (col("dem_items"), col("mpm_items"));
+    let p = |who: &str| -> Vec<[f64; 3]> {
+        let (x, y, z) = (col(&format!("{who}_px")), col(&format!("{who}_py")), col(&format!("{who}_pz")));
+        (0..x.len()).map(|i| [x[i], y[i], z[i]]).collect()
+    };
+    let (p_before, p_dem, p_mpm) = (p("oracle"), p("dem"), p("mpm"));
     let (mut epochs, mut converting) = (0, 0);
-    for (i, r) in rows.iter().enumerate() {
-        let before = f(&r[k("oracle_mass")]);
-        if before == 0.0 {
+    for i in 0..t.len() {
+        if before[i] == 0.0 {
             continue;
         }
         epochs += 1;
-        let after = f(&r[k("dem_mass")]) + f(&r[k("mpm_mass")]);
-        assert!((after - before).abs() < 0.01 * before, "step {}: mass {before} -> {after}", r[0]);
-        let dp: f64 = ["x", "y", "z"]
-            .iter()
-            .map(|a| {
-                let p_after = f(&r[k(&format!("dem_p{a}"))]) + f(&r[k(&format!("mpm_p{a}"))]);
-                (p_after - f(&r[k(&format!("oracle_p{a}"))])).powi(2)
-            })
+        let after = dem_mass[i] + mpm_mass[i];
+        assert!(
+            (after - before[i]).abs() < 0.01 * before[i],
+            "step {}: mass {} -> {after}",
+            step[i],
+            before[i]
+        );
+        let dp = (0..3)
+            .map(|a| (p_dem[i][a] + p_mpm[i][a] - p_before[i][a]).powi(2))
             .sum::<f64>()
             .sqrt();
-        let p: f64 = ["x", "y", "z"]
-            .iter()
-            .map(|a| f(&r[k(&format!("oracle_p{a}"))]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let scale = p.max(before * (9.81f64 * 1e-3).sqrt());
-        assert!(dp < 0.01 * scale, "step {}: momentum changed by {dp}, 1% of {scale}", r[0]);
-        let prev = &rows[i - 1];
-        if r[k("dem_items")] != prev[k("dem_items")] || r[k("mpm_items")] != prev[k("mpm_items")] {
+        let p = p_before[i].iter().map(|c| c * c).sum::<f64>().sqrt();
+        let scale = p.max(before[i] * (9.81f64 * 1e-3).sqrt());
+        assert!(dp < 0.01 * scale, "step {}: momentum changed by {dp}, 1% of {scale}", step[i]);
+        if dem_items[i] != dem_items[i - 1] || mpm_items[i] != mpm_items[i - 1] {
             converting += 1;
         }
     }
     assert_eq!(epochs, 10);
     assert!(converting >= 2, "only {converting} epochs converted anything");
-    text
+    std::fs::read_to_string(dir.join("metrics.csv")).unwrap()
 }
 
 /// The oracle forced to one model: a band at φ0 = 1 km (every cell discrete, no points) gives

@@ -16,6 +16,7 @@ pub mod session;
 pub mod signals;
 pub mod solver;
 pub mod synthetic;
+pub mod telemetry;
 pub mod vtu;
 pub mod zones;
 

@@ -1,10 +1,12 @@
 //! VTU frames of point clouds (grains, material points) for ParaView: open
-//! `frames/<name>.pvd`.
+//! `frames/<name>.pvd`. Written by the solvers ([`PointFrames`]) and read back by validation
+//! and tests ([`Frame::read`], [`collection`]) in this one place.
 //!
 //! Each frame is an XML UnstructuredGrid of vertices with the given point data, written to a
 //! temporary file and renamed; the `.pvd` collection listing every frame with its time is
 //! rewritten the same way after each one, so a crash never leaves a half-written frame listed.
 
+use anyhow::{Context, bail};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -114,6 +116,95 @@ impl PointFrames {
     }
 }
 
+/// A frame read back: the points and every point-data array (values as numbers, point after
+/// point, `components` per point).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Frame {
+    pub points: Vec<[f64; 3]>,
+    pub arrays: Vec<(String, usize, Vec<f64>)>,
+}
+
+impl Frame {
+    /// Reads a VTU file as [`PointFrames`] writes it (ASCII data arrays).
+    pub fn read(path: &Path) -> anyhow::Result<Frame> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        Self::parse(&text).with_context(|| format!("{}: not a VTU frame of grains or points", path.display()))
+    }
+
+    pub fn parse(text: &str) -> anyhow::Result<Frame> {
+        let doc = roxmltree::Document::parse(text)?;
+        let piece = doc.descendants().find(|n| n.has_tag_name("Piece")).context("no <Piece>")?;
+        let n: usize = piece
+            .attribute("NumberOfPoints")
+            .context("<Piece> without NumberOfPoints")?
+            .parse()
+            .context("NumberOfPoints is not a count")?;
+        let points = piece.children().find(|c| c.has_tag_name("Points")).context("no <Points>")?;
+        let xyz = points
+            .children()
+            .find(|c| c.has_tag_name("DataArray"))
+            .context("<Points> without a DataArray")?;
+        let flat = values(&xyz, n * 3)?;
+        let mut frame = Frame {
+            points: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            arrays: Vec::new(),
+        };
+        if let Some(data) = piece.children().find(|c| c.has_tag_name("PointData")) {
+            for a in data.children().filter(|c| c.has_tag_name("DataArray")) {
+                let name = a.attribute("Name").context("a point-data array without a Name")?;
+                let components: usize = a.attribute("NumberOfComponents").unwrap_or("1").parse()?;
+                let v = values(&a, n * components).with_context(|| format!("array {name}"))?;
+                frame.arrays.push((name.to_string(), components, v));
+            }
+        }
+        Ok(frame)
+    }
+
+    /// Point-data array `name`, if the frame has it.
+    pub fn array(&self, name: &str) -> Option<&[f64]> {
+        self.arrays.iter().find(|(n, _, _)| n == name).map(|(_, _, v)| v.as_slice())
+    }
+}
+
+/// The values of an ASCII data array, which must hold `expected` of them.
+fn values(node: &roxmltree::Node, expected: usize) -> anyhow::Result<Vec<f64>> {
+    let format = node.attribute("format").unwrap_or("ascii");
+    if format != "ascii" {
+        bail!("data array in format {format:?}: this reader takes \"ascii\"");
+    }
+    let v: Vec<f64> = node
+        .text()
+        .unwrap_or("")
+        .split_ascii_whitespace()
+        .map(|w| w.parse::<f64>().with_context(|| format!("{w:?} is not a number")))
+        .collect::<anyhow::Result<_>>()?;
+    if v.len() != expected {
+        bail!("{} values, expected {expected}", v.len());
+    }
+    Ok(v)
+}
+
+/// The frames a `.pvd` collection lists: (time, file), in order, the files resolved next to
+/// the collection.
+pub fn collection(pvd: &Path) -> anyhow::Result<Vec<(f64, PathBuf)>> {
+    let text = std::fs::read_to_string(pvd).with_context(|| format!("reading {}", pvd.display()))?;
+    let doc = roxmltree::Document::parse(&text).with_context(|| format!("{}: not XML", pvd.display()))?;
+    let dir = pvd.parent().unwrap_or(Path::new("."));
+    doc.descendants()
+        .filter(|n| n.has_tag_name("DataSet"))
+        .map(|d| {
+            let time = d
+                .attribute("timestep")
+                .and_then(|t| t.parse().ok())
+                .with_context(|| format!("{}: a data set without a timestep", pvd.display()))?;
+            let file = d
+                .attribute("file")
+                .with_context(|| format!("{}: a data set without a file", pvd.display()))?;
+            Ok((time, dir.join(file)))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -122,5 +213,52 @@ mod tests {
         assert_ne!(t, 0.001, "the sum must carry noise, or the test proves nothing");
         assert_eq!(super::frame_time(t), 0.001);
         assert_eq!(super::frame_time(0.123456789), 0.123456789);
+    }
+
+    /// What the writer writes, the reader reads: points, arrays of 1 and 3 components, ids;
+    /// the collection lists every frame at its time.
+    #[test]
+    fn frames_and_collections_read_back_what_was_written() {
+        use super::*;
+        let dir = std::env::temp_dir().join(format!("grains-vtu-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut frames = PointFrames::new(&dir, "grains").unwrap();
+        let x = [[0.5, 1.0, 0.0], [1e-3, -2.25, 3.0]];
+        let radius = [5e-4, 6e-4];
+        let v = [1.0, 2.0, 3.0, -4.0, -5.0, -6.0];
+        let ids = [7u64, 9];
+        let fields = [
+            Field {
+                name: "id",
+                components: 1,
+                values: Values::U64(&ids),
+            },
+            Field {
+                name: "radius",
+                components: 1,
+                values: Values::F64(&radius),
+            },
+            Field {
+                name: "velocity",
+                components: 3,
+                values: Values::F64(&v),
+            },
+        ];
+        let first = frames.write(0, 0.0, &x, &fields).unwrap();
+        frames.write(10, 0.0009999999999999705, &x, &fields).unwrap();
+        let f = Frame::read(&first).unwrap();
+        assert_eq!(f.points, x);
+        assert_eq!(f.array("radius").unwrap(), radius);
+        assert_eq!(f.array("velocity").unwrap(), v);
+        assert_eq!(f.array("id").unwrap(), [7.0, 9.0]);
+        assert!(f.array("mass").is_none());
+        let list = collection(&dir.join("frames/grains.pvd")).unwrap();
+        assert_eq!(list.iter().map(|(t, _)| *t).collect::<Vec<_>>(), [0.0, 0.001]);
+        assert_eq!(list[1].1, dir.join("frames/grains_00000010.vtu"));
+        // A truncated frame is an error, not a shorter frame.
+        let text = std::fs::read_to_string(&first).unwrap();
+        let cut = text.replacen("0.5 1 0", "0.5 1", 1);
+        assert!(Frame::parse(&cut).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

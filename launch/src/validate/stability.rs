@@ -1,9 +1,6 @@
-//! `grains validate --part contact,stability`: the DEM contact law against its analytic
-//! restitution, and stability maps: where each method fails as its knob grows.
+//! `grains validate --part stability`: stability maps, where each method fails as its knob
+//! grows.
 //!
-//! - **contact**: two equal grains of the column's material meet head-on; the rebound over the
-//!   approach speed is the restitution the damping was derived from (linear spring–dashpot:
-//!   e = exp(−πζ/√(1−ζ²)), Cundall & Strack's model as used by Yue 2018 §2). Checked to 2%.
 //! - **DEM time step** (in process, the library the DEM participant runs): the column's settled
 //!   packing (a = 0.5) collapsing for 20 ms with dt = f × the critical step 2/ω (√(1+ζ²) − ζ)
 //!   of the lightest pair. Unstable: a non-finite grain, or the total energy (kinetic +
@@ -19,93 +16,24 @@
 //! - **MPM cell / grain diameter** (processes): the same hybrid column on cells of 1–4 grain
 //!   diameters (Yue 2018 used 2 and saw trouble at 1).
 //!
-//! `--quick` runs the contact check and the two in-process maps (seconds); the process maps
-//! run in a full validation.
+//! `--quick` runs the two in-process maps (seconds); the process maps run in a full
+//! validation.
 
-use crate::chart::{Chart, Kind, Series, VLine};
+use super::args::ValidateArgs;
+use super::column::sweep;
+use super::packings;
+use super::runs::load_with;
+use super::scenes::column::{BOTTOM, DEM, HYBRID, L0 as L0_COLUMN, MPM};
 use crate::report::Part;
-use crate::validate::{L0_COLUMN, ValidateArgs, ensure_packing, load_with, sweep};
-use grains_dem::contact::{ContactParams, Damping};
+use crate::report::chart::{Chart, Kind, Series, VLine};
 use grains_dem::pipeline::{DemPipeline, SAFE_FRACTION, critical_time_step};
-use grains_dem::space::{D2, Space};
-use grains_dem::state::{DemParams, DemState, Domain, Grains};
+use grains_dem::space::D2;
+use grains_dem::state::DemState;
 use grains_mpm::pipeline::MAX_CFL;
 use std::fmt::Write as _;
 
-/// Restitution coefficients checked and their tolerance.
-const RESTITUTIONS: [f64; 3] = [0.1, 0.5, 0.9];
-const RESTITUTION_TOLERANCE: f64 = 0.02;
 /// A run is unstable when the energy rises by this share of m g H / 2.
 const ENERGY_GAIN: f64 = 0.1;
-
-/// Rebound over approach speed of a head-on impact of two grains with `p`, radius `r`.
-fn impact(p: ContactParams, r: f64, density: f64) -> f64 {
-    let mut st = DemState::<D2> {
-        grains: Grains::default(),
-        walls: Vec::new(),
-        params: DemParams {
-            materials: vec![p],
-            gravity: D2::from_array([0.0; 3]),
-            domain: Domain {
-                min: [-1.0; 3],
-                max: [1.0; 3],
-                periodic: [false; 3],
-            },
-            skin: 0.1 * r,
-        },
-        time: 0.0,
-    };
-    let m = Grains::<D2>::mass_of(r, density);
-    let v0 = 0.1;
-    let a = st.grains.push(0, D2::from_array([-1.05 * r, 0.0, 0.0]), r, m, 0);
-    let b = st.grains.push(1, D2::from_array([1.05 * r, 0.0, 0.0]), r, m, 0);
-    st.grains.v[a] = D2::from_array([v0, 0.0, 0.0]);
-    st.grains.v[b] = D2::from_array([-v0, 0.0, 0.0]);
-    let contact = std::f64::consts::PI / (p.stiffness_normal / (0.5 * m)).sqrt();
-    let dt = contact / 200.0;
-    let steps = (3.0 * contact / dt) as usize + (0.1 * r / v0 / dt) as usize;
-    let mut pipe = DemPipeline::<D2>::new(1).expect("one thread");
-    pipe.run(&mut st, dt, steps);
-    let (a, b) = (st.grains.index_of(0).unwrap(), st.grains.index_of(1).unwrap());
-    D2::component(st.grains.v[b] - st.grains.v[a], 0) / (2.0 * v0)
-}
-
-pub fn validate_contact(args: &ValidateArgs) -> anyhow::Result<Part> {
-    let scene = load_with(&args.scenes.join("silo_hybrid_2d.toml"), &[])?;
-    let mat = &scene.materials[0];
-    let dem = mat.dem.as_ref().expect("the silo's material has DEM parameters");
-    let mut part = Part::default();
-    let mut md = String::from("## DEM contact: restitution of a head-on impact\n\n");
-    let _ = writeln!(
-        md,
-        "Two grains of `silo_hybrid_2d.toml`'s material (radius {} m, k_n = {:.3e} N/m, density {} kg/m³) meet head-on \
-         at ±0.1 m/s, 200 steps per contact time; measured: rebound over approach speed. Reference: the restitution the \
-         damping was derived from (linear spring–dashpot, e = exp(−πζ/√(1−ζ²))).\n\n| set e | measured | error |\n|---:|---:|---:|",
-        dem.radius, dem.stiffness_normal, mat.density
-    );
-    for e in RESTITUTIONS {
-        let p = ContactParams {
-            stiffness_normal: dem.stiffness_normal,
-            stiffness_tangential: dem.stiffness_tangential,
-            damping: Damping::Restitution(e),
-            friction: dem.friction,
-            cohesion_normal: 0.0,
-            cohesion_tangential: 0.0,
-        };
-        let got = impact(p, dem.radius, mat.density);
-        let err = got / e - 1.0;
-        let _ = writeln!(md, "| {e} | {got:.4} | {:+.2}% |", 100.0 * err);
-        part.check(
-            format!("DEM restitution e = {e}"),
-            "analytic: the set e (linear spring–dashpot)",
-            format!("{got:.4} ({:+.2}%)", 100.0 * err),
-            format!("±{:.0}%", 100.0 * RESTITUTION_TOLERANCE),
-            err.abs() <= RESTITUTION_TOLERANCE,
-        );
-    }
-    part.md = md;
-    Ok(part)
-}
 
 /// One run of a stability map.
 struct Probe {
@@ -119,7 +47,7 @@ struct Probe {
     wall: f64,
 }
 
-pub fn validate_stability(args: &ValidateArgs) -> anyhow::Result<Part> {
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let mut part = Part::default();
     let mut md = String::from("## Stability maps\n\n");
     let dem = dem_map(args)?;
@@ -274,10 +202,10 @@ fn map_chart(title: &str, x: &str, y: &str, probes: &[Probe], vlines: Vec<VLine>
 
 fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
     let a = 0.5;
-    let packing = ensure_packing(args, 1.0, 1)?;
-    let path = args.scenes.join("column_collapse_2d.toml");
+    let packing = packings::column(args, 1.0, 1)?;
+    let path = args.scenes.join(DEM);
     let base = vec![
-        format!("body.0.max=[{L0_COLUMN},{}]", 0.0015 + a * L0_COLUMN),
+        format!("body.0.max=[{L0_COLUMN},{}]", BOTTOM + a * L0_COLUMN),
         format!("body.0.packing={:?}", packing.display().to_string()),
     ];
     let scene = load_with(&path, &base)?;
@@ -292,7 +220,7 @@ fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
     let mut probes = Vec::new();
     for f in [0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.3, 2.0] {
         let dt = f * critical;
-        eprintln!("validate: stability, DEM dt = {f} × critical ({dt:.2e} s)");
+        tracing::info!("validate: stability, DEM dt = {f} × critical ({dt:.2e} s)");
         let t0 = std::time::Instant::now();
         let mut st = state0.clone();
         let mut pipe = DemPipeline::<D2>::new(scene.threads as usize)?;
@@ -339,7 +267,7 @@ fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
 fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
     use grains_mpm::pipeline::{MpmPipeline, cfl_time_step};
     let a = 1.0;
-    let path = args.scenes.join("column_collapse_mpm_2d.toml");
+    let path = args.scenes.join(MPM);
     let scene = load_with(&path, &[format!("body.0.max=[{L0_COLUMN},{}]", a * L0_COLUMN)])?;
     let zones = grains_service::zones::ZoneField::layered(&scene);
     let (pts0, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&scene, &zones).map_err(anyhow::Error::msg)?;
@@ -353,7 +281,7 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
     let mut probes = Vec::new();
     for f in [0.1, 0.3, 0.5, 0.8, 0.9, 0.95, 1.0, 1.2, 1.5, 2.0, 3.0] {
         let dt = f * limit;
-        eprintln!("validate: stability, MPM CFL {f} ({dt:.2e} s)");
+        tracing::info!("validate: stability, MPM CFL {f} ({dt:.2e} s)");
         let t0 = std::time::Instant::now();
         let mut pts = pts0.clone();
         let mut pipe = MpmPipeline::new(scene.threads as usize).map_err(anyhow::Error::msg)?;
@@ -396,8 +324,8 @@ fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow:
     } else {
         args.sweep_k.clone()
     };
-    let packing = ensure_packing(args, 1.0, 1)?;
-    let hybrid = load_with(&args.scenes.join("column_collapse_hybrid_2d.toml"), &args.hybrid_overrides)?;
+    let packing = packings::column(args, 1.0, 1)?;
+    let hybrid = load_with(&args.scenes.join(HYBRID), &args.hybrid_overrides)?;
     let mat = &hybrid.materials[0];
     let rho = mat.density * mat.mpm.as_ref().map_or(1.0, |m| m.packing);
     let model = grains_mpm_service::setup::model(mat, 2);
@@ -473,7 +401,7 @@ fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow:
             format!("coupling.discrete_layer={layer}"),
             format!("coupling.hybrid_band={layer}"),
         ];
-        eprintln!("validate: stability, hybrid cell = {r} d");
+        tracing::info!("validate: stability, hybrid cell = {r} d");
         let row = sweep(args, &packing, &[10], &extra)?.remove(0);
         cell_rows.push(Probe {
             knob: r,

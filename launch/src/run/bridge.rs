@@ -2,7 +2,7 @@
 //! participants, never admitted or waited for; if it ends early the launcher warns and the run
 //! goes on; at the end of the run it is stopped.
 
-use crate::participants::{bin_dir, child_command, describe};
+use super::participants::{bin_dir, child_command, describe};
 use grains_bridge::config::{BridgeArgs, BridgeConfig};
 use grains_protocol::Role;
 use grains_protocol::scene::Scene;

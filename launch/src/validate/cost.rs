@@ -14,13 +14,18 @@
 //!   DEM is left out here: grains of 1.5 d would make the orifice 4 grains wide, another
 //!   silo (Beverloo's k d term), not a cheaper model of the same one.
 
-use crate::chart::{Chart, Kind, Series, pareto_front};
+use super::args::ValidateArgs;
+use super::column::run_case;
+use super::deposit::{BIN, FRONT_HEIGHT, deposit, front, profile, profile_l1};
+use super::packings;
+use super::runs::{RunResult, finished, load_with};
+use super::scenes::column::{DEM, HYBRID, L0, MPM};
+use super::scenes::silo::SCENE as SILO;
+use super::silo::{self, Model};
+use crate::metrics::MetricsTable;
 use crate::report::Part;
-use crate::validate::{
-    BIN, FRONT_HEIGHT, L0_COLUMN as L0, RunResult, ValidateArgs, deposit, ensure_packing, finished, front, load_with, poured, profile,
-    profile_l1, run_case,
-};
-use crate::validate_silo::{self as silo, Model};
+use crate::report::chart::{Chart, Kind, Series, pareto_front};
+use grains_protocol::Role;
 use std::fmt::Write as _;
 
 /// One run of the chart.
@@ -36,7 +41,7 @@ struct Row {
     points: u64,
 }
 
-pub fn validate_cost(args: &ValidateArgs) -> anyhow::Result<Part> {
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let mut part = Part::default();
     let mut md = String::from("## Accuracy against cost\n\n");
     md.push_str(
@@ -125,26 +130,13 @@ fn cost_chart(title: &str, y: &str, rows: &[Row]) -> Chart {
     chart
 }
 
-/// A packing of grains `s` times the scenes' 1 mm, for columns up to a = 1.
-fn coarse_packing(args: &ValidateArgs, s: f64, grain: &[String]) -> anyhow::Result<std::path::PathBuf> {
-    let pour_top = 1.5 * s * 1e-3 + 1.35 * L0 + 0.005;
-    let mut overrides = vec![
-        format!("body.0.min=[0.0,{}]", 1.5 * s * 1e-3),
-        format!("body.0.max=[{L0},{pour_top}]"),
-        format!("body.1.max=[{L0},{}]", 1.3 * s * 1e-3),
-        format!("run.duration={:.2}", (2.0 * pour_top / 9.81).sqrt() + 0.2),
-    ];
-    overrides.extend(grain.iter().cloned());
-    poured(args, &format!("packing_column_d{s}mm.data"), "column_packing_2d.toml", overrides)
-}
-
 fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
     let a = 1.0;
-    let hybrid = load_with(&args.scenes.join("column_collapse_hybrid_2d.toml"), &[])?;
+    let hybrid = load_with(&args.scenes.join(HYBRID), &[])?;
     let n_bins = ((hybrid.domain.max[0] / BIN) as usize).max(1);
-    let packing = ensure_packing(args, a, 1)?;
-    eprintln!("validate: cost, column: DEM 1 mm (reference)");
-    let reference = run_case(args, "column_collapse_2d.toml", &packing, a, &[])?;
+    let packing = packings::column(args, a, 1)?;
+    tracing::info!("validate: cost, column: DEM 1 mm (reference)");
+    let reference = run_case(args, DEM, &packing, a, &[])?;
     let h_ref = profile(&deposit(&reference.dir, 0.0)?, BIN, n_bins);
     let runout_ref = front(&h_ref, BIN, FRONT_HEIGHT) - L0;
     let mut rows = Vec::new();
@@ -152,7 +144,7 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
         let h = profile(&deposit(&r.dir, point_half)?, BIN, n_bins);
         let f = front(&h, BIN, FRONT_HEIGHT);
         let error = ((f - L0) / runout_ref - 1.0).abs();
-        eprintln!(
+        tracing::info!(
             "validate: cost, column {family} {label}: front {f:.3} m, error {:.1}%, {:.1} s",
             100.0 * error,
             r.wall
@@ -177,29 +169,23 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             format!("material.0.dem.damping={}", 7.0 * s),
             format!("coupling.substeps={}", (100.0 / s).round()),
         ];
-        let packing = coarse_packing(args, s, &grain)?;
+        let packing = packings::coarse_column(args, s, &grain)?;
         let mut extra = grain.clone();
         extra.extend([format!("body.0.min=[0.0,{}]", 1.5 * d), format!("body.1.max=[0.5,{}]", 1.3 * d)]);
         // run_case puts the column's top at 1.5 mm + a L0; the coarse floor row is thicker.
         extra.push(format!("body.0.max=[{L0},{}]", 1.5 * d + a * L0));
-        eprintln!("validate: cost, column: DEM d = {s} mm");
-        let r = run_case(args, "column_collapse_2d.toml", &packing, a, &extra)?;
+        tracing::info!("validate: cost, column: DEM d = {s} mm");
+        let r = run_case(args, DEM, &packing, a, &extra)?;
         push("DEM", format!("d = {s} mm"), &r, 0.0)?;
     }
     // The scene's DEM step (Chen 2021: 5e-7 s) is 1/72 of the critical step; larger ones, up
     // to the 1/5 `grains run` allows.
     for substeps in [25, 7] {
-        eprintln!("validate: cost, column: DEM d = 1 mm, {substeps} substeps");
-        let r = run_case(
-            args,
-            "column_collapse_2d.toml",
-            &packing,
-            a,
-            &[format!("coupling.substeps={substeps}")],
-        )?;
+        tracing::info!("validate: cost, column: DEM d = 1 mm, {substeps} substeps");
+        let r = run_case(args, DEM, &packing, a, &[format!("coupling.substeps={substeps}")])?;
         push("DEM", format!("d = 1 mm, dt = {:.2e} s", 5e-5 / substeps as f64), &r, 0.0)?;
     }
-    let mpm = args.scenes.join("column_collapse_mpm_2d.toml");
+    let mpm = args.scenes.join(MPM);
     for cell in [4.0, 2.0, 1.0] {
         let h = cell * 1e-3;
         let mut overrides = vec![
@@ -212,7 +198,7 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
         ];
         let steps = load_with(&mpm, &overrides)?.steps;
         overrides.push(format!("output.frames_every={steps}"));
-        eprintln!("validate: cost, column: MPM cell {cell} mm");
+        tracing::info!("validate: cost, column: MPM cell {cell} mm");
         let r = finished(args, &mpm, overrides)?;
         push("MPM", format!("cell {cell} mm"), &r, 0.25 * h)?;
     }
@@ -223,22 +209,22 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             format!("coupling.discrete_layer={}", layer * 1e-3),
             format!("coupling.hybrid_band={}", layer * 1e-3),
         ];
-        eprintln!("validate: cost, column: hybrid cell {cell} mm, layer {layer} mm");
-        let r = run_case(args, "column_collapse_hybrid_2d.toml", &packing, a, &extra)?;
+        tracing::info!("validate: cost, column: hybrid cell {cell} mm, layer {layer} mm");
+        let r = run_case(args, HYBRID, &packing, a, &extra)?;
         push("hybrid", format!("cell {cell} mm, layer {layer} mm"), &r, 0.25 * cell * 1e-3)?;
     }
     Ok(rows)
 }
 
 fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
-    let packing = silo::ensure_packing(args)?;
+    let packing = packings::silo(args)?;
     let w = Some(silo::REFERENCE);
     let mut rows = Vec::new();
-    eprintln!("validate: cost, silo: DEM (reference)");
-    let reference = silo::run_silo(args, silo::SCENE, &packing, Model::Dem, w, None, &[])?;
-    let mut push = |family: &'static str, label: String, r: silo::SiloRun| {
+    tracing::info!("validate: cost, silo: DEM (reference)");
+    let reference = silo::run_silo(args, SILO, &packing, Model::Dem, w, None, &[])?;
+    let mut push = |family: &'static str, label: String, r: silo::SiloRun| -> anyhow::Result<()> {
         let error = (r.rate / reference.rate - 1.0).abs();
-        eprintln!(
+        tracing::info!(
             "validate: cost, silo {family} {label}: W {:.3}, error {:.1}%, {:.1} s",
             r.rate,
             100.0 * error,
@@ -251,26 +237,30 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             error,
             l1: f64::NAN,
             grains: r.grains.round() as u64,
-            points: crate::validate::Table::read(&r.dir).mean("mpm_items").round() as u64,
+            points: MetricsTable::read(&r.dir)?
+                .participant(Role::Mpm, "items")?
+                .map_or(0.0, |v| v.iter().sum::<f64>() / v.len().max(1) as f64)
+                .round() as u64,
         });
+        Ok(())
     };
     for layer in [4.0, 8.0] {
         let extra = [
             format!("coupling.discrete_layer={}", layer * 1e-3),
             format!("coupling.hybrid_band={}", layer * 1e-3),
         ];
-        eprintln!("validate: cost, silo: hybrid layer {layer} mm");
-        let r = silo::run_silo(args, silo::SCENE, &packing, Model::Hybrid, w, None, &extra)?;
-        push("hybrid", format!("cell 2 mm, layer {layer} mm (mean counts)"), r);
+        tracing::info!("validate: cost, silo: hybrid layer {layer} mm");
+        let r = silo::run_silo(args, SILO, &packing, Model::Hybrid, w, None, &extra)?;
+        push("hybrid", format!("cell 2 mm, layer {layer} mm (mean counts)"), r)?;
     }
     for cell in [silo::MPM_CELL, 2.0 * silo::MPM_CELL] {
         let extra = [
             format!("domain.cell_size={cell}"),
             format!("run.dt={:e}", silo::MPM_DT * cell / silo::MPM_CELL),
         ];
-        eprintln!("validate: cost, silo: MPM cell {} mm", cell * 1e3);
-        let r = silo::run_silo(args, silo::SCENE, &packing, Model::Mpm, w, None, &extra)?;
-        push("MPM", format!("cell {} mm", cell * 1e3), r);
+        tracing::info!("validate: cost, silo: MPM cell {} mm", cell * 1e3);
+        let r = silo::run_silo(args, SILO, &packing, Model::Mpm, w, None, &extra)?;
+        push("MPM", format!("cell {} mm", cell * 1e3), r)?;
     }
     let reference_wall = reference.wall;
     let grains = reference.grains.round() as u64;

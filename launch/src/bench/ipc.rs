@@ -9,7 +9,7 @@
 //! and checksums are off, so that the exchange, not the synthetic solver, is what is timed.
 
 use crate::run::{RunOptions, Status, TransportKind, run};
-use anyhow::{Context, bail};
+use anyhow::bail;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -40,20 +40,13 @@ fn scene_text(nodes: u64, steps: u64) -> String {
 
 /// Seconds per macro-step after the first `warmup` steps, from the `wall_s` column.
 fn per_step(dir: &Path, warmup: u64) -> anyhow::Result<f64> {
-    let csv = std::fs::read_to_string(dir.join("metrics.csv"))?;
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().context("empty metrics")?.split(',').collect();
-    let wall = header.iter().position(|c| *c == "wall_s").context("no wall_s column")?;
-    let rows: Vec<(u64, f64)> = lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f[0].parse().unwrap_or(0), f[wall].parse().unwrap_or(f64::NAN))
-        })
-        .collect();
-    let (Some(a), Some(b)) = (rows.iter().find(|r| r.0 == warmup), rows.last()) else {
-        bail!("too few rows")
+    let t = crate::metrics::MetricsTable::read(dir)?;
+    let (steps, wall) = (t.column("step")?, t.column("wall_s")?);
+    let Some(a) = steps.iter().position(|&s| s == warmup as f64) else {
+        bail!("{}: too few rows, no step {warmup}", dir.display())
     };
-    Ok((b.1 - a.1) / (b.0 - a.0) as f64)
+    let b = steps.len() - 1;
+    Ok((wall[b] - wall[a]) / (steps[b] - steps[a]))
 }
 
 /// Median and minimum of the repeats.
@@ -107,11 +100,11 @@ pub fn ipc(args: &IpcArgs) -> anyhow::Result<()> {
         // stays in tens of seconds.
         let steps = (200_000_000 / n.max(1)).clamp(20, 2_000);
         let warmup = (steps / 5).max(2);
-        eprintln!("bench ipc: {n} nodes, {steps} steps x {} repeats per transport ...", args.repeats);
+        tracing::info!("bench ipc: {n} nodes, {steps} steps x {} repeats per transport ...", args.repeats);
         let (inproc, ipc) = measure(args, n, steps, warmup)?;
         rows.push((n, steps, inproc, ipc));
     }
-    eprintln!("bench ipc: handshake with 1-node payloads, {} steps ...", args.handshake_steps);
+    tracing::info!("bench ipc: handshake with 1-node payloads, {} steps ...", args.handshake_steps);
     let (hs_inproc, hs_ipc) = measure(args, 1, args.handshake_steps, args.handshake_steps / 10)?;
 
     let mut out = String::new();
@@ -146,6 +139,6 @@ pub fn ipc(args: &IpcArgs) -> anyhow::Result<()> {
     let table = args.out.join("ipc.md");
     let mut f = std::fs::File::create(&table)?;
     f.write_all(out.as_bytes())?;
-    eprintln!("bench ipc: table written to {}", table.display());
+    tracing::info!("bench ipc: table written to {}", table.display());
     Ok(())
 }

@@ -2,8 +2,7 @@
 //! as SVG and as PNG, with the data behind it as CSV (`series,x,y`), so that every picture of a
 //! report can be checked against its numbers.
 //!
-//! Text in both needs a TrueType font, read at run time: `$GRAINS_FONT`, else DejaVu Sans
-//! where Debian's `fonts-dejavu-core` puts it (installed by `.ci/run`).
+//! Text is drawn in DejaVu Sans, built into the binary: charts need no font on the machine.
 
 use anyhow::{Context, anyhow};
 use plotters::coord::Shift;
@@ -77,33 +76,13 @@ const COLOURS: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
-const FONT_PATHS: [&str; 3] = [
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-];
-
-/// Registers the font once per process; the error says where it looked.
+/// Registers the chart font once per process: DejaVu Sans, built into the binary (the
+/// `dejavu` crate), so that charts need nothing from the machine.
 fn font() -> anyhow::Result<()> {
     static FONT: OnceLock<Result<(), String>> = OnceLock::new();
     FONT.get_or_init(|| {
-        let candidates: Vec<String> = std::env::var("GRAINS_FONT")
-            .into_iter()
-            .chain(FONT_PATHS.iter().map(|p| p.to_string()))
-            .collect();
-        let (path, bytes) = candidates
-            .iter()
-            .find_map(|p| std::fs::read(p).ok().map(|b| (p, b)))
-            .ok_or_else(|| {
-                format!(
-                    "charts need a TrueType font and none was found at {}; install Debian's fonts-dejavu-core or set GRAINS_FONT to a .ttf file",
-                    candidates.join(", ")
-                )
-            })?;
-        // plotters keeps fonts for the life of the process.
-        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-            .map_err(|_| format!("{path}: not a TrueType font plotters can read"))
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+            .map_err(|_| "the built-in DejaVu Sans is not a font plotters can read".to_string())
     })
     .clone()
     .map_err(|e| anyhow!(e))
@@ -278,14 +257,9 @@ mod tests {
         assert_eq!(pareto_front(&pts), vec![0, 2, 3]);
     }
 
-    /// Both pictures are written and the CSV holds every point; skipped (with a message) on a
-    /// machine without the font, which `.ci/run` installs.
+    /// Both pictures are written and the CSV holds every point.
     #[test]
     fn a_chart_writes_svg_png_and_its_data() {
-        if let Err(e) = font() {
-            eprintln!("skipped: {e}");
-            return;
-        }
         let dir = std::env::temp_dir().join(format!("grains-chart-{}", std::process::id()));
         let chart = Chart {
             title: "test".into(),

@@ -203,7 +203,7 @@ impl Participants for Threads {
                         how: "ended".into(),
                     },
                     Ok(Err(e)) => {
-                        eprintln!("{}: error: {e:#}", role.binary());
+                        tracing::error!("{} failed: {e:#}", role.binary());
                         Exit {
                             role: *role,
                             ok: false,

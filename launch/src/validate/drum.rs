@@ -5,16 +5,19 @@
 //! half of the drum's width, a least-squares line through the tops, its angle to the
 //! horizontal; averaged over the frames. Check: the hybrid's within 3° of the DEM's.
 
-use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, poured, run_scene};
-use crate::validate_silo::slope;
+use super::args::ValidateArgs;
+use super::deposit::frames_of;
+use super::packings;
+use super::runs::{SCENE_USE_HEADER, load_with, run_scene, scene_use};
+use super::scenes::drum::{CENTRE, RADIUS, SCENE};
+use super::stats::slope;
+use crate::metrics::MetricsTable;
+use crate::run::Status;
 use anyhow::bail;
+use grains_service::vtu::Frame;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-const SCENE: &str = "drum_hybrid_2d.toml";
-/// The drum's centre and radius [m] (the scene's).
-const CENTRE: [f64; 2] = [0.05, 0.05];
-const RADIUS: f64 = 0.045;
 const COLUMN: f64 = 0.002;
 /// Frames from this time on are in the steady rolling regime [s].
 const STEADY: f64 = 1.0;
@@ -49,17 +52,6 @@ struct DrumRun {
     dir: PathBuf,
 }
 
-fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
-    // The drum at rest, a lattice to 62 mm settling to about half full.
-    let overrides = [
-        "body.0.model=\"dem\"",
-        "body.0.max=[0.095,0.062]",
-        "wall.0.spin=0.0",
-        "run.duration=0.35",
-    ];
-    poured(args, "packing_drum_seed1.data", SCENE, overrides.map(String::from).to_vec())
-}
-
 fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> anyhow::Result<DrumRun> {
     let path = args.scenes.join(SCENE);
     let mut overrides = vec![format!("body.0.packing={:?}", packing.display().to_string())];
@@ -67,11 +59,11 @@ fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> 
         overrides.push("body.0.model=\"dem\"".into());
     }
     let outcome = run_scene(args, &path, overrides)?;
-    if outcome.status != crate::run::Status::Completed {
+    if outcome.status != Status::Completed {
         bail!("{SCENE}: the run did not complete: {}", outcome.message);
     }
-    let table = crate::validate::Table::read(&outcome.dir);
-    let grains = table.mean("dem_items");
+    let table = MetricsTable::read(&outcome.dir)?;
+    let grains = table.mean("dem_items")?;
     let grain_frames = frames_of(&outcome.dir, "grains")?;
     let point_frames = frames_of(&outcome.dir, "points")?;
     let mut angles = Vec::new();
@@ -79,11 +71,10 @@ fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> 
         if *t < STEADY {
             continue;
         }
-        let a = frame_arrays(file, &["radius"])?;
-        let r = a.get("radius").cloned().unwrap_or_default();
-        let mut tops: Vec<(f64, f64)> = a.x.iter().zip(&r).map(|(x, r)| (x[0], x[1] + r)).collect();
+        let grains = super::deposit::grains_of(&Frame::read(file)?, file)?;
+        let mut tops: Vec<(f64, f64)> = grains.iter().map(|(x, r)| (x[0], x[1] + r)).collect();
         if let Some((_, pf)) = point_frames.get(k) {
-            tops.extend(frame_arrays(pf, &[])?.x.iter().map(|x| (x[0], x[1] + point_half)));
+            tops.extend(Frame::read(pf)?.points.iter().map(|x| (x[0], x[1] + point_half)));
         }
         angles.push(surface_angle(&tops));
     }
@@ -94,20 +85,20 @@ fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> 
         angle: angles.iter().sum::<f64>() / angles.len() as f64,
         frames: angles.len(),
         grains,
-        wall: table.last("wall_s"),
+        wall: table.last("wall_s")?,
         dir: outcome.dir,
     })
 }
 
 /// Runs the drum part and writes `drum.md` in `--out`; whether the check passed.
-pub fn validate_drum(args: &ValidateArgs) -> anyhow::Result<crate::report::Part> {
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<crate::report::Part> {
     let mut part = crate::report::Part::default();
-    let packing = ensure_packing(args)?;
+    let packing = packings::drum(args)?;
     let scene = load_with(&args.scenes.join(SCENE), &[])?;
     let point_half = 0.5 * scene.domain.cell_size / scene.mpm.points_per_axis as f64;
-    eprintln!("validate: drum: DEM");
+    tracing::info!("validate: drum: DEM");
     let dem = run_drum(args, &packing, true, point_half)?;
-    eprintln!("validate: drum: hybrid");
+    tracing::info!("validate: drum: hybrid");
     let hybrid = run_drum(args, &packing, false, point_half)?;
     let diff = hybrid.angle - dem.angle;
     let pass = diff.abs() <= ANGLE_TOLERANCE;
@@ -146,9 +137,9 @@ pub fn validate_drum(args: &ValidateArgs) -> anyhow::Result<crate::report::Part>
         format!("±{ANGLE_TOLERANCE}°"),
         pass,
     );
-    let row = crate::validate::scene_use(args, &mut part, "drum_use", SCENE, &hybrid.dir, &dem.dir)?;
-    writeln!(md, "\n### What each run simulates\n\n{}\n{row}", crate::validate::SCENE_USE_HEADER)?;
-    eprintln!("validate: drum: DEM {:.1}°, hybrid {:.1}°", dem.angle, hybrid.angle);
+    let row = scene_use(args, &mut part, "drum_use", SCENE, &hybrid.dir, &dem.dir)?;
+    writeln!(md, "\n### What each run simulates\n\n{}\n{row}", SCENE_USE_HEADER)?;
+    tracing::info!("validate: drum: DEM {:.1}°, hybrid {:.1}°", dem.angle, hybrid.angle);
     part.md = md;
     Ok(part)
 }

@@ -21,19 +21,22 @@
 //!
 //! `--quick` runs the DEM and the hybrid at the 6-d orifice only (the discharge check).
 
-use crate::chart::{Chart, Kind, Series};
+use super::args::ValidateArgs;
+use super::deposit::frames_of;
+use super::packings;
+use super::runs::{SCENE_USE_HEADER, load_with, run_scene, scene_use};
+use super::scenes::silo::{BOTTOM, CENTRE, D, SCENE, SMALL_SCENE};
+use super::stats::slope;
+use crate::metrics::MetricsTable;
 use crate::report::Part;
-use crate::validate::{ValidateArgs, frame_arrays, frames_of, load_with, poured, run_scene};
+use crate::report::chart::{Chart, Kind, Series};
+use crate::run::Status;
 use anyhow::{Context, bail};
+use grains_protocol::Role;
+use grains_service::vtu::Frame;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-pub(crate) const SCENE: &str = "silo_hybrid_2d.toml";
-const SMALL_SCENE: &str = "silo_small_orifice_2d.toml";
-/// Height of the silo's bottom and its centre line [m] (the scene's).
-const BOTTOM: f64 = 0.06;
-const CENTRE: f64 = 0.02;
-const D: f64 = 0.001;
 /// Window of the discharge-rate fit [s].
 const WINDOW: (f64, f64) = (0.1, 0.45);
 const CLOG_TAIL: f64 = 0.2;
@@ -42,14 +45,14 @@ const RATE_TOLERANCE: f64 = 0.15;
 /// node-based walls open (w / h − 1) nodes, as wide as w (the DEM clogs at 4 mm, measured);
 /// and the small scene's.
 const ORIFICES: [f64; 4] = [0.006, 0.008, 0.010, 0.012];
-pub(crate) const REFERENCE: f64 = 0.006;
+pub const REFERENCE: f64 = 0.006;
 const CLOG_ORIFICE: f64 = 0.003;
 /// Cell and step of the MPM-only runs [m, s] (CFL 0.4 at h / c = 2.5e-5 s).
-pub(crate) const MPM_CELL: f64 = 0.001;
-pub(crate) const MPM_DT: f64 = 1e-5;
+pub const MPM_CELL: f64 = 0.001;
+pub const MPM_DT: f64 = 1e-5;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) enum Model {
+pub enum Model {
     Dem,
     Hybrid,
     Mpm,
@@ -65,7 +68,7 @@ impl Model {
     }
 }
 
-pub(crate) struct SiloRun {
+pub struct SiloRun {
     model: Model,
     orifice: f64,
     restitution: Option<f64>,
@@ -79,18 +82,6 @@ pub(crate) struct SiloRun {
     pub grains: f64,
     pub wall: f64,
     pub dir: PathBuf,
-}
-
-/// Least-squares slope of `y` against `x`.
-pub fn slope(xy: &[(f64, f64)]) -> f64 {
-    let n = xy.len() as f64;
-    if xy.len() < 2 {
-        return f64::NAN;
-    }
-    let (mx, my) = (xy.iter().map(|p| p.0).sum::<f64>() / n, xy.iter().map(|p| p.1).sum::<f64>() / n);
-    let sxy: f64 = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
-    let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    sxy / sxx
 }
 
 /// Beverloo's 2D law fitted to (orifice w, rate W): W^{2/3} = a (w − k d), so a straight line
@@ -132,19 +123,8 @@ pub fn flying_share(grains: &[([f64; 3], f64)], orifice: f64) -> (usize, usize) 
     (flying, bin.len())
 }
 
-pub(crate) fn ensure_packing(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
-    // Bottom closed, a lattice 80 mm tall settling to about 62 mm.
-    let overrides = vec![
-        "body.0.model=\"dem\"".into(),
-        "body.0.max=[0.04,0.14]".into(),
-        format!("wall.0.to=[0.04,{BOTTOM}]"),
-        "run.duration=0.35".into(),
-    ];
-    poured(args, "packing_silo_60mm_seed1.data", SCENE, overrides)
-}
-
 /// One run of `scene` with `model`; at `orifice` if given (else the scene's, `CLOG_ORIFICE`).
-pub(crate) fn run_silo(
+pub fn run_silo(
     args: &ValidateArgs,
     scene: &str,
     packing: &Path,
@@ -181,7 +161,7 @@ pub(crate) fn run_silo(
     let loaded = load_with(&path, &overrides)?;
     let duration = loaded.steps as f64 * loaded.dt;
     let outcome = run_scene(args, &path, overrides)?;
-    if outcome.status != crate::run::Status::Completed {
+    if outcome.status != Status::Completed {
         bail!(
             "{scene} ({}, orifice {} mm): the run did not complete: {}",
             model.name(),
@@ -189,8 +169,11 @@ pub(crate) fn run_silo(
             outcome.message
         );
     }
-    let table = crate::validate::Table::read(&outcome.dir);
-    let grains = table.mean("dem_items");
+    let table = MetricsTable::read(&outcome.dir)?;
+    let grains = match table.participant(Role::Dem, "items")? {
+        Some(v) => v.iter().sum::<f64>() / v.len().max(1) as f64,
+        None => 0.0,
+    };
     let mut discharged = Vec::new();
     let (mut flown, mut counted) = (0usize, 0usize);
     let grain_frames = frames_of(&outcome.dir, "grains")?;
@@ -204,13 +187,19 @@ pub(crate) fn run_silo(
         let mut below = 0.0;
         for frames in [&grain_frames, &point_frames] {
             let Some((_, file)) = frames.get(k) else { continue };
-            let a = frame_arrays(file, &["mass", "radius"])?;
-            let mass = a.get("mass").with_context(|| format!("{}: no mass array", file.display()))?;
-            below += a.x.iter().zip(mass).filter(|(x, _)| x[1] < BOTTOM).map(|(_, m)| m).sum::<f64>();
-            if let Some(r) = a.get("radius")
+            let a = Frame::read(file)?;
+            let mass = a.array("mass").with_context(|| format!("{}: no mass array", file.display()))?;
+            below += a
+                .points
+                .iter()
+                .zip(mass)
+                .filter(|(x, _)| x[1] < BOTTOM)
+                .map(|(_, m)| m)
+                .sum::<f64>();
+            if let Some(r) = a.array("radius")
                 && (WINDOW.0..=WINDOW.1).contains(&t)
             {
-                let grains: Vec<([f64; 3], f64)> = a.x.iter().copied().zip(r.iter().copied()).collect();
+                let grains: Vec<([f64; 3], f64)> = a.points.iter().copied().zip(r.iter().copied()).collect();
                 let (f, n) = flying_share(&grains, orifice);
                 flown += f;
                 counted += n;
@@ -233,15 +222,15 @@ pub(crate) fn run_silo(
         flying: if counted > 0 { flown as f64 / counted as f64 } else { 0.0 },
         discharged,
         grains,
-        wall: table.last("wall_s"),
+        wall: table.last("wall_s")?,
         dir: outcome.dir,
     })
 }
 
 /// Runs the silo part and writes `silo.md` and `silo.csv` in `--out`; whether every check passed.
-pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<Part> {
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let mut part = Part::default();
-    let packing = ensure_packing(args)?;
+    let packing = packings::silo(args)?;
     let scene = load_with(&args.scenes.join(SCENE), &[])?;
     let material = &scene.materials[0];
     let bulk = material.density * material.mpm.as_ref().map_or(1.0, |m| m.packing);
@@ -254,20 +243,20 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<Part> {
     let mut runs = Vec::new();
     for &w in &orifices {
         for &m in &models {
-            eprintln!("validate: silo, orifice {:.0} mm: {}", w * 1e3, m.name());
+            tracing::info!("validate: silo, orifice {:.0} mm: {}", w * 1e3, m.name());
             let r = run_silo(args, SCENE, &packing, m, Some(w), None, &[])?;
-            eprintln!("validate: silo {} w = {:.0} mm: rate {:.3} kg/(m s)", m.name(), w * 1e3, r.rate);
+            tracing::info!("validate: silo {} w = {:.0} mm: rate {:.3} kg/(m s)", m.name(), w * 1e3, r.rate);
             runs.push(r);
         }
     }
     let mut extra = Vec::new();
     if !args.quick {
         for &m in &models {
-            eprintln!("validate: silo, orifice {:.0} mm (clogging): {}", CLOG_ORIFICE * 1e3, m.name());
+            tracing::info!("validate: silo, orifice {:.0} mm (clogging): {}", CLOG_ORIFICE * 1e3, m.name());
             extra.push(run_silo(args, SMALL_SCENE, &packing, m, None, None, &[])?);
         }
         for m in [Model::Dem, Model::Hybrid] {
-            eprintln!("validate: silo, restitution 0: {}", m.name());
+            tracing::info!("validate: silo, restitution 0: {}", m.name());
             extra.push(run_silo(args, SCENE, &packing, m, Some(REFERENCE), Some(0.0), &[])?);
         }
     }
@@ -459,12 +448,12 @@ pub fn validate_silo(args: &ValidateArgs) -> anyhow::Result<Part> {
     let dem = runs.iter().find(|r| r.orifice == REFERENCE && r.model == Model::Dem);
     let hybrid = runs.iter().find(|r| r.orifice == REFERENCE && r.model == Model::Hybrid);
     if let (Some(d), Some(h)) = (dem, hybrid) {
-        let row = crate::validate::scene_use(args, &mut part, "silo_use", SCENE, &h.dir, &d.dir)?;
+        let row = scene_use(args, &mut part, "silo_use", SCENE, &h.dir, &d.dir)?;
         writeln!(
             md,
             "\n### What each run simulates ({:.0} mm)\n\n{}\n{row}",
             REFERENCE * 1e3,
-            crate::validate::SCENE_USE_HEADER
+            SCENE_USE_HEADER
         )?;
     }
     let mut csv = String::from("model,orifice_m,restitution,time_s,discharged_kg_per_m\n");

@@ -8,6 +8,7 @@
 //! each with 300 untimed warm-up steps. Figures: CPU and wall µs per grain-step of the timed
 //! loop, grains counted with their frozen base as LAMMPS counts atoms.
 
+use super::machine::cpu_seconds;
 use anyhow::{Context, bail};
 use grains_dem::contact::{ContactParams, Damping};
 use grains_dem::pipeline::DemPipeline;
@@ -118,15 +119,6 @@ const CASES: [Case; 8] = [
 const WARM: u64 = 300;
 const DT: f64 = 5e-7;
 const SKIN: f64 = 1e-4;
-
-/// Seconds of CPU time (user + system, all threads) this process has used.
-fn cpu_seconds() -> f64 {
-    // SAFETY: getrusage fills the struct it is given.
-    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
-    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) };
-    let t = |tv: libc::timeval| tv.tv_sec as f64 + tv.tv_usec as f64 * 1e-6;
-    t(ru.ru_utime) + t(ru.ru_stime)
-}
 
 /// The contact law of the peers' decks: Chen 2021 Table 1 in 2D (per metre), its 3D
 /// equivalent with the same contact time and restitution in 3D; constant viscous damping.
@@ -296,7 +288,7 @@ pub fn dem(args: &DemArgs) -> anyhow::Result<()> {
     if !args.peers.join("gen_pack.py").exists() {
         bail!("{}: no peer decks there (pass --peers <shared/peers/dem>)", args.peers.display());
     }
-    eprintln!("bench dem: building or reusing the beds in {}", beds.display());
+    tracing::info!("bench dem: building or reusing the beds in {}", beds.display());
     let status = Command::new("bash")
         .arg(&script)
         .arg(&args.peers)
@@ -320,7 +312,7 @@ pub fn dem(args: &DemArgs) -> anyhow::Result<()> {
         } else {
             data
         };
-        eprintln!("bench dem: {} ({} grains, {steps} steps)", case.name, data.atoms.len());
+        tracing::info!("bench dem: {} ({} grains, {steps} steps)", case.name, data.atoms.len());
         let run = |threads| {
             if case.dim == 3 {
                 run_grains::<D3>(&data, case.flow, threads, steps)
@@ -362,6 +354,6 @@ pub fn dem(args: &DemArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("dem.md");
     std::fs::File::create(&path)?.write_all(out.as_bytes())?;
-    eprintln!("bench dem: table written to {}", path.display());
+    tracing::info!("bench dem: table written to {}", path.display());
     Ok(())
 }

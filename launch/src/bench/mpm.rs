@@ -19,7 +19,8 @@
 //! The machine may be shared: before each run the bench waits for builds and other load to end
 //! (`--quiet-wait`), and each row reports how many cores other processes used meanwhile.
 
-use crate::outputs;
+use super::machine::{children_cpu_seconds, cpu_seconds, machine_busy_seconds, other_load, wait_quiet};
+use crate::run::outputs;
 use anyhow::{Context, bail};
 use grains_grid::{D2, D3, Grid, Kernel};
 use grains_mpm::boundary::Contact;
@@ -31,7 +32,7 @@ use serde_json::{Value, json};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct MpmArgs {
@@ -235,82 +236,6 @@ fn block<S: MpmSpace>(case: &Case) -> Points<S> {
         }
     }
     pts
-}
-
-/// Seconds of CPU time (all threads) this process has used.
-fn cpu_seconds() -> f64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: clock_gettime writes the timespec it is given.
-    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
-}
-
-/// Seconds of CPU time the children this process has waited for have used.
-fn children_cpu_seconds() -> f64 {
-    // SAFETY: getrusage fills the struct it is given.
-    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
-    unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut ru) };
-    let t = |tv: libc::timeval| tv.tv_sec as f64 + tv.tv_usec as f64 * 1e-6;
-    t(ru.ru_utime) + t(ru.ru_stime)
-}
-
-/// Busy CPU seconds of the whole machine so far (all cores, /proc/stat), NaN if unknown.
-fn machine_busy_seconds() -> f64 {
-    let Some(line) = std::fs::read_to_string("/proc/stat")
-        .ok()
-        .and_then(|s| s.lines().next().map(String::from))
-    else {
-        return f64::NAN;
-    };
-    // cpu  user nice system idle iowait irq softirq steal ...
-    let f: Vec<f64> = line.split_whitespace().skip(1).filter_map(|w| w.parse().ok()).collect();
-    if f.len() < 8 {
-        return f64::NAN;
-    }
-    // SAFETY: sysconf has no preconditions.
-    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
-    (f[0] + f[1] + f[2] + f[5] + f[6] + f[7]) / tick
-}
-
-/// What else the machine did while one run took `wall` seconds: (machine busy − own) / wall, in
-/// cores.
-fn other_load(busy0: f64, own: f64, wall: f64) -> f64 {
-    ((machine_busy_seconds() - busy0 - own) / wall).max(0.0)
-}
-
-/// Processes named cargo or rustc on the machine (a build competing for the 2 cores).
-fn compilers_running() -> bool {
-    let Ok(dir) = std::fs::read_dir("/proc") else { return false };
-    dir.flatten().any(|e| {
-        e.file_name().to_str().is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()))
-            && std::fs::read_to_string(e.path().join("comm")).is_ok_and(|c| matches!(c.trim(), "cargo" | "rustc"))
-    })
-}
-
-/// Cores kept busy by other processes over one second (this process is idle meanwhile).
-fn busy_cores_now() -> f64 {
-    let b0 = machine_busy_seconds();
-    std::thread::sleep(Duration::from_secs(1));
-    machine_busy_seconds() - b0
-}
-
-/// Waits (up to `limit` seconds) while a cargo or rustc process runs or other processes keep
-/// more than a third of a core busy; says whether it had to give up.
-fn wait_quiet(limit: u64) -> bool {
-    let t0 = Instant::now();
-    let mut told = false;
-    while limit > 0 && (compilers_running() || busy_cores_now() > 0.33) {
-        if t0.elapsed().as_secs() >= limit {
-            eprintln!("bench mpm: the machine is still busy after {limit} s; measuring anyway");
-            return true;
-        }
-        if !told {
-            eprintln!("bench mpm: a build or other load is running; waiting for the machine to be quiet");
-            told = true;
-        }
-        std::thread::sleep(Duration::from_secs(4));
-    }
-    false
 }
 
 /// One measured run of one code.
@@ -549,7 +474,7 @@ fn run_taichi(taichi: &Taichi, case: &Case, peer: Peer, threads: usize, args: &M
     let (extent, in_box) = match npy_extent(&dump, case.dim) {
         Ok((e, ok)) => (Some(e), ok),
         Err(e) => {
-            eprintln!("bench mpm: cannot read the peer's positions: {e:#}");
+            tracing::warn!("bench mpm: cannot read the peer's positions: {e:#}");
             (None, true)
         }
     };
@@ -607,7 +532,7 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
         if let Some(v) = &args.venv {
             cmd.arg(v);
         }
-        eprintln!("bench mpm: making or reusing the taichi venv ({})", setup.display());
+        tracing::info!("bench mpm: making or reusing the taichi venv ({})", setup.display());
         let o = cmd
             .stderr(std::process::Stdio::inherit())
             .output()
@@ -635,10 +560,10 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
         }
         let steps = ((case.steps as f64 * args.steps_scale).round() as usize).max(3);
         let untimed = case.untimed(args, steps);
-        eprintln!("bench mpm: {} ({n} points, {untimed} untimed + {steps} timed steps)", case.name);
+        tracing::info!("bench mpm: {} ({n} points, {untimed} untimed + {steps} timed steps)", case.name);
         let mut runs = Vec::new();
         for threads in [1, 2] {
-            loaded |= wait_quiet(args.quiet_wait);
+            loaded |= wait_quiet("bench mpm", args.quiet_wait);
             let r = if case.dim == 3 {
                 run_grains::<D3>(case, threads, untimed, steps)
             } else {
@@ -646,11 +571,12 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
             }
             .unwrap_or_else(|e| Run::failed("grains", "PIC/FLIP 0.95 f64", threads, steps, &e));
             match &r.failed {
-                None => eprintln!(
+                None => tracing::info!(
                     "bench mpm:   grains, {threads} thread(s): {:.4} µs/pt-step wall, {:.4} CPU",
-                    r.wall_us, r.cpu_us
+                    r.wall_us,
+                    r.cpu_us
                 ),
-                Some(e) => eprintln!("bench mpm:   grains, {threads} thread(s): FAILED: {e}"),
+                Some(e) => tracing::warn!("bench mpm:   grains, {threads} thread(s): FAILED: {e}"),
             }
             runs.push(r);
         }
@@ -660,15 +586,18 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
                 todo.push((Peer::Apic32, 1));
             }
             for (p, threads) in todo {
-                loaded |= wait_quiet(args.quiet_wait);
+                loaded |= wait_quiet("bench mpm", args.quiet_wait);
                 let r = run_taichi(taichi, case, p, threads, args, steps)
                     .unwrap_or_else(|e| Run::failed("taichi", p.variant(), threads, steps, &e));
                 match &r.failed {
-                    None => eprintln!(
+                    None => tracing::info!(
                         "bench mpm:   {} {}, {threads} thread(s): {:.4} µs/pt-step wall, {:.4} CPU",
-                        r.code, r.variant, r.wall_us, r.cpu_us
+                        r.code,
+                        r.variant,
+                        r.wall_us,
+                        r.cpu_us
                     ),
-                    Some(e) => eprintln!("bench mpm:   taichi {}, {threads} thread(s): FAILED: {e}", r.variant),
+                    Some(e) => tracing::warn!("bench mpm:   taichi {}, {threads} thread(s): FAILED: {e}", r.variant),
                 }
                 runs.push(r);
             }
@@ -713,7 +642,7 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
     }
     outputs::write_atomic(&out.join("mpm.csv"), csv.as_bytes())?;
     outputs::write_atomic(&out.join("mpm.jsonl"), jsonl.as_bytes())?;
-    eprintln!(
+    tracing::info!(
         "bench mpm: table, CSV and raw JSON lines written to {}/mpm.{{md,csv,jsonl}}",
         out.display()
     );

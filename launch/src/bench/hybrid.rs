@@ -8,7 +8,8 @@
 //! also in-process. The figures are whole-run wall times from `metrics.csv` (`wall_s`).
 
 use crate::run::{RunOptions, Status, TransportKind, run};
-use anyhow::{Context, bail};
+use anyhow::bail;
+use grains_protocol::Role;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -38,19 +39,11 @@ struct Row {
     wall: f64,
 }
 
-/// (first row's dem_items, first row's mpm_items, last row's wall_s) of a run.
+/// (first row's grains, first row's points, last row's wall_s) of a run.
 fn read(dir: &Path) -> anyhow::Result<(u64, u64, f64)> {
-    let csv = std::fs::read_to_string(dir.join("metrics.csv")).context("reading metrics.csv")?;
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().context("empty metrics")?.split(',').collect();
-    let col = |name: &str| header.iter().position(|c| *c == name);
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
-        bail!("no rows")
-    };
-    let count = |name: &str| col(name).map_or(0, |c| first[c].parse().unwrap_or(0));
-    let wall = col("wall_s").context("no wall_s column")?;
-    Ok((count("dem_items"), count("mpm_items"), last[wall].parse()?))
+    let t = crate::metrics::MetricsTable::read(dir)?;
+    let first = |role| -> anyhow::Result<u64> { Ok(t.participant(role, "items")?.and_then(|v| v.first().copied()).unwrap_or(0.0) as u64) };
+    Ok((first(Role::Dem)?, first(Role::Mpm)?, t.last("wall_s")?))
 }
 
 fn one(args: &HybridArgs, scene: &str, transport: TransportKind, extra: &[String]) -> anyhow::Result<(u64, u64, f64)> {
@@ -80,7 +73,7 @@ fn one(args: &HybridArgs, scene: &str, transport: TransportKind, extra: &[String
 pub fn bench(args: &HybridArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let mut rows = Vec::new();
-    eprintln!("bench hybrid: DEM column {} × 0.4 m, {} s", args.width, args.duration);
+    tracing::info!("bench hybrid: DEM column {} × 0.4 m, {} s", args.width, args.duration);
     let (grains, _, wall) = one(args, "column_collapse_2d.toml", TransportKind::Ipc, &[])?;
     rows.push(Row {
         label: "DEM, 100 substeps of 5e-7 s".into(),
@@ -96,7 +89,7 @@ pub fn bench(args: &HybridArgs) -> anyhow::Result<()> {
             &[TransportKind::Ipc]
         };
         for &t in transports {
-            eprintln!("bench hybrid: hybrid k = {k} ({t:?})");
+            tracing::info!("bench hybrid: hybrid k = {k} ({t:?})");
             let (grains, points, wall) = one(args, "column_collapse_hybrid_2d.toml", t, &extra)?;
             let how = if t == TransportKind::Ipc { "processes" } else { "threads" };
             rows.push(Row {
@@ -133,6 +126,6 @@ pub fn bench(args: &HybridArgs) -> anyhow::Result<()> {
     print!("{md}");
     let path = args.out.join("hybrid.md");
     std::fs::File::create(&path)?.write_all(md.as_bytes())?;
-    eprintln!("bench hybrid: table written to {}", path.display());
+    tracing::info!("bench hybrid: table written to {}", path.display());
     Ok(())
 }

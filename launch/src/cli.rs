@@ -1,0 +1,120 @@
+//! The command line of `grains` (clap derive); `main.rs` dispatches it.
+
+use clap::{Parser, Subcommand};
+use grains_launch::remote::Remote;
+use grains_launch::run::TransportKind;
+use grains_protocol::Role;
+use std::path::PathBuf;
+
+/// grains: hybrid discrete–continuum simulation of granular media.
+#[derive(Parser)]
+#[command(name = "grains", version)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Cmd,
+}
+
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// Run a scene: start its participants, show progress, write out/<scene>/<run-id>/.
+    Run(RunArgs),
+    /// Live table of a run's summaries, from its bridge (here or on another machine).
+    Monitor {
+        /// Run id (see `grains runs`).
+        #[arg(long)]
+        run: String,
+        /// Stop after this many rows.
+        #[arg(long)]
+        rows: Option<u64>,
+        #[command(flatten)]
+        remote: Remote,
+    },
+    /// Send a command to a run through its bridge: pause, resume, stop, snapshot, or
+    /// `set KEY VALUE`; prints the step at which it took effect, or why it was refused.
+    Steer {
+        /// Run id (see `grains runs`).
+        #[arg(long)]
+        run: String,
+        /// pause | resume | stop | snapshot | set KEY VALUE
+        #[arg(required = true, num_args = 1..=3, allow_hyphen_values = true)]
+        command: Vec<String>,
+        #[command(flatten)]
+        remote: Remote,
+    },
+    /// List the runs whose bridge answers at an endpoint.
+    Runs {
+        #[command(flatten)]
+        remote: Remote,
+    },
+    /// Pour and settle a DEM scene's grains; save the packing for scenes to reuse.
+    Pack(grains_launch::pack::PackArgs),
+    /// Check a scene file and print what a run of it would start.
+    Check { scene: PathBuf },
+    /// Validation against reference results: report, pictures, non-zero exit on a failed check.
+    Validate(grains_launch::validate::ValidateArgs),
+    /// Benchmarks that print tables.
+    Bench {
+        #[command(subcommand)]
+        what: BenchCmd,
+    },
+}
+
+#[derive(clap::Args)]
+pub struct RunArgs {
+    /// Scene file (TOML, schema v1; see scenes/README.md).
+    pub scene: PathBuf,
+    /// How participants run and talk.
+    #[arg(long, value_enum, default_value_t = TransportKind::Ipc)]
+    pub transport: TransportKind,
+    /// Start everything but this participant and wait for it to attach (repeatable).
+    #[arg(long, value_parser = parse_role)]
+    pub external: Vec<Role>,
+    /// Root of the output directories.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// No live progress line.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Override a scene value before validation, e.g. `--set coupling.substeps=20` or
+    /// `--set body.0.max=[0.04,0.08]` (repeatable; values in TOML syntax).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+    /// Open the run to remote clients over zenoh (grains monitor, grains steer; see README).
+    #[arg(long)]
+    pub bridge: bool,
+    #[command(flatten)]
+    pub bridge_args: grains_bridge::config::BridgeArgs,
+}
+
+impl RunArgs {
+    pub fn options(self) -> grains_launch::run::RunOptions {
+        grains_launch::run::RunOptions {
+            scene_path: self.scene,
+            transport: self.transport,
+            external: self.external,
+            out_root: self.out,
+            progress: !self.quiet,
+            overrides: self.overrides,
+            announce: true,
+            bridge: self.bridge.then_some(self.bridge_args),
+        }
+    }
+}
+
+#[derive(Subcommand)]
+pub enum BenchCmd {
+    /// Per-macro-step exchange time, iceoryx2 processes vs in-process threads.
+    Ipc(grains_launch::bench::ipc::IpcArgs),
+    /// DEM µs per grain-step on dense beds, side by side with LAMMPS.
+    Dem(grains_launch::bench::dem::DemArgs),
+    /// Hybrid vs pure DEM column collapse at 100,000 grains; processes vs threads.
+    Hybrid(grains_launch::bench::hybrid::HybridArgs),
+    /// MPM µs per point-step of a collapsing sand block, side by side with Taichi.
+    Mpm(grains_launch::bench::mpm::MpmArgs),
+}
+
+fn parse_role(s: &str) -> Result<Role, String> {
+    Role::from_name(s)
+        .filter(|r| Role::PARTICIPANTS.contains(r))
+        .ok_or_else(|| format!("{s:?} is not a participant; one of: dem, mpm, coupler, oracle"))
+}

@@ -1,0 +1,279 @@
+//! `grains run`: one run from scene file to outputs.
+//!
+//! The launcher owns the run (STYLE §2.2 invariant 5): it creates the run id and the
+//! iceoryx2 domain, opens the admission, summary and control services before any participant
+//! exists, starts only the participants the scene needs ([`participants`]), admits them
+//! ([`admission`]: protocol version, scene, role), releases them all at once, writes one
+//! metrics row per macro-step from their summaries, supervises them ([`supervisor`]: a
+//! participant that dies is named within a second and the others are stopped), and cleans up
+//! every file of the run at the end ([`outputs`], [`crate::metrics`]).
+
+mod admission;
+pub mod bridge;
+pub mod outputs;
+pub mod participants;
+mod progress;
+mod supervisor;
+
+use anyhow::{Context, bail};
+use bridge::Bridge;
+use grains_bridge::config::BridgeArgs;
+use grains_protocol::Role;
+use grains_protocol::scene::{self, Scene};
+use grains_service::signals::StopFlag;
+use grains_transport::{inproc::InProc, ipc};
+use outputs::{write_atomic, write_summary};
+use participants::{Participants, Processes, Threads};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime};
+use supervisor::Supervisor;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TransportKind {
+    /// Separate processes exchanging over iceoryx2 shared memory.
+    Ipc,
+    /// Threads of the launcher's process (same participants, same protocol).
+    Inproc,
+}
+
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub scene_path: PathBuf,
+    pub transport: TransportKind,
+    /// Participants the launcher does not start: it waits for them to attach.
+    pub external: Vec<Role>,
+    /// Outputs go to `<out_root>/<scene name>/<run id>/`.
+    pub out_root: PathBuf,
+    /// Live progress on stderr.
+    pub progress: bool,
+    /// `--set key=value` overrides of the scene (applied before validation).
+    pub overrides: Vec<String>,
+    /// Say on stderr what the run is (id, output directory, participants) and how it ended.
+    pub announce: bool,
+    /// Start the zenoh bridge with these flags.
+    pub bridge: Option<BridgeArgs>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    Completed,
+    Failed,
+    Interrupted,
+    /// Ended early by a `stop` control command (from the bridge).
+    Stopped,
+}
+
+impl Status {
+    pub fn exit_code(self) -> u8 {
+        match self {
+            Status::Completed | Status::Stopped => 0,
+            Status::Failed => 1,
+            Status::Interrupted => 130,
+        }
+    }
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Completed => "completed",
+            Status::Failed => "failed",
+            Status::Interrupted => "interrupted",
+            Status::Stopped => "stopped",
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct RunOutcome {
+    pub run_id: String,
+    pub dir: PathBuf,
+    pub status: Status,
+    pub message: String,
+    pub steps_done: u64,
+    /// Wall time from the release of the participants to the last metrics row.
+    pub stepping: Duration,
+}
+
+/// Bad input to `grains run` (exit code 2), apart from scene errors.
+#[derive(Debug)]
+pub struct BadInput(pub String);
+
+/// What the solvers need of a physics scene, checked before anything starts: the participants
+/// this build can run, then each solver's own checks (time steps against their limits).
+pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
+    let roles = scene.participants();
+    match roles.as_slice() {
+        [Role::Dem] => grains_dem_service::check_scene(scene)?,
+        [Role::Mpm] => grains_mpm_service::check_scene(scene)?,
+        [Role::Dem, Role::Mpm, Role::Coupler, Role::Oracle] => {
+            grains_dem_service::check_scene(scene)?;
+            grains_mpm_service::check_scene(scene)?;
+            grains_oracle_service::check_scene(scene)?;
+        }
+        _ => {
+            let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
+            bail!(BadInput(format!(
+                "{}: this scene needs {}; this build runs DEM-only, MPM-only and hybrid scenes",
+                scene.path.display(),
+                list.join(", ")
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// `grains check`: validates a scene file and the solvers' checks of it, and says what a
+/// run would start.
+pub fn check(path: &Path) -> anyhow::Result<()> {
+    let s = scene::load(path)?;
+    if s.synthetic.is_none() {
+        check_physics(&s)?;
+    }
+    let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
+    println!(
+        "{}: ok: scene {:?}, {}D, {} steps of {} s; starts {}",
+        path.display(),
+        s.name,
+        s.dim(),
+        s.steps,
+        s.dt,
+        roles.join(", ")
+    );
+    Ok(())
+}
+
+impl std::fmt::Display for BadInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BadInput {}
+
+/// A new run id: UTC date and time plus 16 random bits, e.g. `20261122-013502-9f3a`.
+pub fn new_run_id() -> String {
+    let now = SystemTime::now().duration_since(SystemTime::UNIX_EPOCH).unwrap_or_default();
+    let noise = (now.subsec_nanos() as u64 ^ ((std::process::id() as u64) << 20)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 48;
+    format!("{}-{noise:04x}", crate::clock::Utc::from_unix(now.as_secs()).compact())
+}
+
+/// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
+pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
+    let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
+    // Participants read the run's copy of the scene: packing and bridge settings files must
+    // not depend on where that copy lies, so their paths become absolute there.
+    let bridge_settings = scene.bridge.as_ref().and_then(|b| b.settings.as_ref());
+    let (scene, text) = if scene.bodies.iter().any(|b| b.packing.is_some()) || bridge_settings.is_some() {
+        let mut overrides = opts.overrides.clone();
+        let absolute = |p: &Path| std::fs::canonicalize(p).with_context(|| format!("resolving {}", p.display()));
+        for (k, b) in scene.bodies.iter().enumerate() {
+            if let Some(p) = &b.packing {
+                overrides.push(format!("body.{k}.packing={:?}", absolute(p)?.display().to_string()));
+            }
+        }
+        if let Some(p) = bridge_settings {
+            overrides.push(format!("bridge.settings={:?}", absolute(p)?.display().to_string()));
+        }
+        scene::load_with_overrides(&opts.scene_path, &overrides)?
+    } else {
+        (scene, text)
+    };
+    let roles = scene.participants();
+    if scene.synthetic.is_none() {
+        check_physics(&scene)?;
+    }
+    for e in &opts.external {
+        if !roles.contains(e) {
+            let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
+            bail!(BadInput(format!(
+                "--external {e}: the scene has no {e} participant (it runs: {})",
+                list.join(", ")
+            )));
+        }
+    }
+    if opts.transport == TransportKind::Inproc && !opts.external.is_empty() {
+        bail!(BadInput(
+            "--external needs --transport ipc: an external participant is another process".into()
+        ));
+    }
+    // The bridge: asked for on the command line, or by the scene's [bridge] table.
+    // The scene's settings file is the base; flags on the command line override it.
+    let bridge_args = match (&opts.bridge, &scene.bridge) {
+        (Some(args), b) => Some(BridgeArgs {
+            config: args.config.clone().or_else(|| b.as_ref().and_then(|b| b.settings.clone())),
+            ..args.clone()
+        }),
+        (None, Some(b)) => Some(BridgeArgs {
+            config: b.settings.clone(),
+            ..BridgeArgs::default()
+        }),
+        (None, None) => None,
+    };
+    let bridge_cfg = match &bridge_args {
+        Some(args) => Some(args.resolve().map_err(|e| BadInput(format!("{e:#}")))?),
+        None => None,
+    };
+    // A launcher killed outright (SIGKILL) leaves its run's files in /dev/shm.
+    for (dead, files) in ipc::remove_dead_runs() {
+        if opts.announce {
+            tracing::info!("removed {} files left by run {dead}, whose processes are all gone", files.len());
+        }
+    }
+    let run_id = new_run_id();
+    let dir = opts.out_root.join(&scene.name).join(&run_id);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
+    // The exact scene of the run (overrides applied) sits beside its outputs; every
+    // participant reads this copy.
+    let scene_copy = dir.join("scene.toml");
+    write_atomic(&scene_copy, text.as_bytes()).with_context(|| format!("writing {}", scene_copy.display()))?;
+    let scene_path = std::fs::canonicalize(&scene_copy).with_context(|| format!("resolving {}", scene_copy.display()))?;
+
+    let started = SystemTime::now();
+    let ctx = RunCtx {
+        scene: &scene,
+        scene_path: &scene_path,
+        roles: &roles,
+        run_id: &run_id,
+        dir: &dir,
+        opts,
+    };
+    let (report, participants) = match opts.transport {
+        TransportKind::Ipc => {
+            let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary(), StopFlag::with_signals().as_cancel())?;
+            let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
+            let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
+            let bridge = || match &bridge_args {
+                Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir).map(Some),
+                None => Ok(None),
+            };
+            let result = Supervisor::start(&transport, &ctx, bridge, || {
+                Ok(Box::new(Processes::spawn(&spawned, &scene_path, &run_id, &dir, external_timeout)?) as Box<dyn Participants>)
+            })
+            .and_then(Supervisor::run);
+            drop(transport);
+            ipc::remove_run_files(&run_id);
+            result?
+        }
+        TransportKind::Inproc => {
+            let bus = InProc::new();
+            let bridge = || match &bridge_cfg {
+                Some(cfg) => Bridge::spawn_thread(cfg, &bus, &scene, &run_id, &dir).map(Some),
+                None => Ok(None),
+            };
+            Supervisor::start(&bus, &ctx, bridge, || {
+                Ok(Box::new(Threads::spawn(&roles, &scene, &run_id, &dir, &bus)?) as Box<dyn Participants>)
+            })?
+            .run()?
+        }
+    };
+    write_summary(&ctx, &report, participants, started)?;
+    Ok(report)
+}
+
+/// What every part of the launcher needs to know of the run.
+struct RunCtx<'a> {
+    scene: &'a Scene,
+    scene_path: &'a Path,
+    roles: &'a [Role],
+    run_id: &'a str,
+    dir: &'a Path,
+    opts: &'a RunOptions,
+}

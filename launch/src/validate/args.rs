@@ -1,0 +1,116 @@
+//! What `grains validate` is asked to do: its flags, and the registry of its parts.
+
+use crate::report::Part;
+use std::path::PathBuf;
+
+/// The parts of the validation, in the order they run: the one registry of cases, with
+/// what each checks, whether CI's `--quick` runs it, and the function that runs it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PartName {
+    /// DEM restitution of a head-on impact against its analytic value.
+    Contact,
+    /// Stability maps: DEM step, MPM CFL number, hybrid substeps and cell size.
+    Stability,
+    /// Column collapse against the pure DEM and the published runout laws.
+    Column,
+    /// Silo discharge, Beverloo fits, clogging, bouncing grains.
+    Silo,
+    /// The free-surface angle in a turning drum.
+    Drum,
+    /// Accuracy against wall time, with the Pareto front.
+    Cost,
+}
+
+impl PartName {
+    pub const ALL: [PartName; 6] = [
+        PartName::Contact,
+        PartName::Stability,
+        PartName::Column,
+        PartName::Silo,
+        PartName::Drum,
+        PartName::Cost,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            PartName::Contact => "contact",
+            PartName::Stability => "stability",
+            PartName::Column => "column",
+            PartName::Silo => "silo",
+            PartName::Drum => "drum",
+            PartName::Cost => "cost",
+        }
+    }
+
+    /// In CI's `--quick` set (the drum and the accuracy–cost runs take too long for it).
+    pub fn quick(self) -> bool {
+        !matches!(self, PartName::Drum | PartName::Cost)
+    }
+
+    pub fn run(self, args: &ValidateArgs) -> anyhow::Result<Part> {
+        match self {
+            PartName::Contact => super::contact::validate(args),
+            PartName::Stability => super::stability::validate(args),
+            PartName::Column => super::column::validate(args),
+            PartName::Silo => super::silo::validate(args),
+            PartName::Drum => super::drum::validate(args),
+            PartName::Cost => super::cost::validate(args),
+        }
+    }
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct ValidateArgs {
+    /// The CI subset: aspect ratio 1 only.
+    #[arg(long)]
+    pub quick: bool,
+    /// Aspect ratios to run instead of the default set.
+    #[arg(long, value_delimiter = ',')]
+    pub aspect: Vec<f64>,
+    /// Directory of column_collapse_2d.toml and column_collapse_hybrid_2d.toml.
+    #[arg(long, default_value = "scenes")]
+    pub scenes: PathBuf,
+    /// Where the runs and the report go (default `out/validate/<today>`).
+    #[arg(long = "out", value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// `--out`, or its default, once `validate` has chosen it.
+    #[arg(skip)]
+    pub out: PathBuf,
+    /// DEM substeps per MPM step to sweep for stability (hybrid, a = 1, first 0.2 s); the
+    /// default set 2, 5, 10, 20, 40, 80, 160 runs without `--quick`.
+    #[arg(long, value_delimiter = ',')]
+    pub sweep_k: Vec<u32>,
+    /// The hybrid pile at rest whose surface drift is measured with both grain transfers.
+    #[arg(long, default_value = "tests/scenes/hybrid_pile_2d.toml")]
+    pub pile: PathBuf,
+    /// Extra `--set` overrides for the hybrid runs (to explore; the report lists them).
+    #[arg(long = "set-hybrid", value_name = "KEY=VALUE")]
+    pub hybrid_overrides: Vec<String>,
+    /// Also copy the report and its charts (PNG, SVG, CSV), without the runs, into this
+    /// directory (the repository's `docs/validate` keeps the last published one).
+    #[arg(long)]
+    pub publish: Option<PathBuf>,
+    /// Packings poured (seeds 1..=N) and run at every aspect ratio; the check compares the
+    /// runouts averaged over them. Default 3, `--quick` 1.
+    #[arg(long)]
+    pub packings: Option<u64>,
+    /// Parts to run (default all; `--quick`: those of the CI subset, each in its quick form).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub part: Vec<PartName>,
+}
+
+impl ValidateArgs {
+    /// The parts this invocation runs, in order: those named, else all (`--quick`: the quick ones).
+    pub fn parts(&self) -> Vec<PartName> {
+        PartName::ALL
+            .into_iter()
+            .filter(|p| {
+                if self.part.is_empty() {
+                    !self.quick || p.quick()
+                } else {
+                    self.part.contains(p)
+                }
+            })
+            .collect()
+    }
+}

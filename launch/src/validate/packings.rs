@@ -1,0 +1,97 @@
+//! Every packing the validation pours, in one place: each is a `grains pack` of a scene with
+//! overrides, kept in `--out` under a name that says what it is, and poured once (later runs
+//! reuse it). Both models of a comparison start from the same packing.
+
+use super::args::ValidateArgs;
+use super::scenes::{
+    self,
+    column::{BOTTOM, D, L0},
+};
+use anyhow::bail;
+use std::path::PathBuf;
+
+/// A packing poured by `grains pack` from `scene` with `overrides`, kept in `--out` as `name`.
+pub fn poured(args: &ValidateArgs, name: &str, scene: &str, overrides: Vec<String>) -> anyhow::Result<PathBuf> {
+    let path = std::path::absolute(args.out.join(name))?;
+    if !path.exists() {
+        tracing::info!("validate: pouring {name} with grains pack");
+        crate::pack::pack(&crate::pack::PackArgs {
+            scene: args.scenes.join(scene),
+            out: path.clone(),
+            friction: None,
+            overrides,
+        })?;
+    }
+    Ok(path)
+}
+
+/// The settled packing of `seed` for columns up to aspect ratio `a_max`. The seed draws the
+/// radii and the lattice's jitter, so each pour settles into another random packing.
+pub fn column(args: &ValidateArgs, a_max: f64, seed: u64) -> anyhow::Result<PathBuf> {
+    // A lattice settles to about 0.78 of its height; pour a third more than the column needs.
+    let pour_top = BOTTOM + 1.35 * a_max * L0 + 0.005;
+    let settle = ((2.0 * pour_top / 9.81).sqrt() + 0.2) * 100.0;
+    let name = format!("packing_column_{:.0}mm_seed{seed}.data", pour_top * 1e3);
+    let path = poured(
+        args,
+        &name,
+        scenes::column::PACKING,
+        vec![
+            format!("body.0.max=[{L0},{pour_top}]"),
+            format!("run.duration={}", settle.ceil() / 100.0),
+            format!("run.seed={seed}"),
+        ],
+    )?;
+    let data = grains_dem_service::lammps_data::read(&path).map_err(anyhow::Error::msg)?;
+    let top = data.atoms.iter().filter(|a| a.kind == 1).map(|a| a.x[1]).fold(0.0, f64::max);
+    if top < BOTTOM + a_max * L0 + D {
+        bail!(
+            "{}: the packing is {:.1} mm tall, too short for a column of aspect ratio {a_max}; delete it to pour a new one",
+            path.display(),
+            top * 1e3
+        );
+    }
+    Ok(path)
+}
+
+/// A column packing of grains `s` times the scenes' 1 mm (with the `grain` overrides that make
+/// them so), for columns up to a = 1.
+pub fn coarse_column(args: &ValidateArgs, s: f64, grain: &[String]) -> anyhow::Result<PathBuf> {
+    let pour_top = 1.5 * s * 1e-3 + 1.35 * L0 + 0.005;
+    let mut overrides = vec![
+        format!("body.0.min=[0.0,{}]", 1.5 * s * 1e-3),
+        format!("body.0.max=[{L0},{pour_top}]"),
+        format!("body.1.max=[{L0},{}]", 1.3 * s * 1e-3),
+        format!("run.duration={:.2}", (2.0 * pour_top / 9.81).sqrt() + 0.2),
+    ];
+    overrides.extend(grain.iter().cloned());
+    poured(args, &format!("packing_column_d{s}mm.data"), scenes::column::PACKING, overrides)
+}
+
+/// The silo's fill: the bottom closed, a lattice 80 mm tall settling to about 62 mm.
+pub fn silo(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
+    use scenes::silo::{BOTTOM, SCENE};
+    let overrides = vec![
+        "body.0.model=\"dem\"".into(),
+        "body.0.max=[0.04,0.14]".into(),
+        format!("wall.0.to=[0.04,{BOTTOM}]"),
+        "run.duration=0.35".into(),
+    ];
+    poured(args, "packing_silo_60mm_seed1.data", SCENE, overrides)
+}
+
+/// The drum at rest, a lattice to 62 mm settling to about half full.
+pub fn drum(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
+    let overrides = [
+        "body.0.model=\"dem\"",
+        "body.0.max=[0.095,0.062]",
+        "wall.0.spin=0.0",
+        "run.duration=0.35",
+    ];
+    poured(
+        args,
+        "packing_drum_seed1.data",
+        scenes::drum::SCENE,
+        overrides.map(String::from).to_vec(),
+    )
+}

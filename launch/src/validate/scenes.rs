@@ -1,0 +1,36 @@
+//! The scenes the validation runs, with the geometry it reads their results by. These must
+//! agree with the files in `scenes/` (their headers say so too).
+
+/// The column collapse (Yue 2018 §5, Lube et al. 2005): a column L₀ wide against the wall at
+/// x = 0, standing on a glued floor row.
+pub mod column {
+    pub const DEM: &str = "column_collapse_2d.toml";
+    pub const HYBRID: &str = "column_collapse_hybrid_2d.toml";
+    pub const MPM: &str = "column_collapse_mpm_2d.toml";
+    /// The pour every column is cut from.
+    pub const PACKING: &str = "column_packing_2d.toml";
+    /// Column width L₀ [m].
+    pub const L0: f64 = 0.04;
+    /// Bottom of the columns, above the floor row [m].
+    pub const BOTTOM: f64 = 0.0015;
+    /// Mean grain diameter [m].
+    pub const D: f64 = 0.001;
+}
+
+/// The silo (Yue 2018 §5.2): a 40 mm bin over an orifice in its bottom at y = 60 mm.
+pub mod silo {
+    pub const SCENE: &str = "silo_hybrid_2d.toml";
+    pub const SMALL_SCENE: &str = "silo_small_orifice_2d.toml";
+    /// The silo's bottom [m] and the orifice's centre [m].
+    pub const BOTTOM: f64 = 0.06;
+    pub const CENTRE: f64 = 0.02;
+    /// Mean grain diameter [m].
+    pub const D: f64 = 0.001;
+}
+
+/// The turning drum.
+pub mod drum {
+    pub const SCENE: &str = "drum_hybrid_2d.toml";
+    pub const CENTRE: [f64; 2] = [0.05, 0.05];
+    pub const RADIUS: f64 = 0.045;
+}
