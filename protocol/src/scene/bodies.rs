@@ -5,6 +5,7 @@ use super::errors::{
     Ctx, SceneError, box_corners, in_range, positive, vec3,
 };
 use super::materials::Material;
+use super::overrides::FieldPath;
 use super::raw::RawBody;
 use std::path::PathBuf;
 use toml::Spanned;
@@ -51,7 +52,10 @@ pub struct Body {
 pub(super) fn validate(ctx: &Ctx, dim: usize, raw: &[RawBody], materials: &[Material]) -> Result<Vec<Body>, SceneError> {
     raw.iter()
         .enumerate()
-        .map(|(i, b)| body(ctx, dim, b, materials, &|name| format!("body[{i}].{name}")))
+        .map(|(i, b)| {
+            let at = FieldPath::root("body").index(i);
+            body(ctx, dim, b, materials, &|name| format!("{at}.{name}"))
+        })
         .collect()
 }
 
@@ -201,5 +205,25 @@ fn packing(ctx: &Ctx, raw: Option<&Spanned<String>>, model: Model, f: &dyn Fn(&s
             }
             Ok(Some(path))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{DEM, check_err, edit, line_of};
+
+    #[test]
+    fn body_errors_name_the_body_by_index() {
+        let text = edit(DEM, "model = \"dem\"", "model = \"sph\"");
+        check_err(&text, Some(line_of(&text, "model")), "body.0.model", "\"hybrid\"");
+        let text = edit(DEM, "max = [0.05, 0.05]", "max = [0.05]");
+        check_err(&text, Some(line_of(&text, "max = [0.05]")), "body.0.max", "expected 2 components");
+        let text = edit(DEM, "material = \"sand\"", "material = \"clay\"");
+        check_err(
+            &text,
+            Some(line_of(&text, "material = \"clay\"")),
+            "body.0.material",
+            "`glass`, `sand`",
+        );
     }
 }

@@ -1,6 +1,7 @@
 //! [`SceneError`] and the checks every section shares: where a value sits in the file (line,
 //! column, field) and whether it is in range.
 
+use super::overrides::{FieldPath, PathSegment};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use toml::Spanned;
@@ -55,10 +56,10 @@ impl Ctx<'_> {
         }
     }
 
-    /// A serde/TOML error: keep its message, add the key written on the offending line.
+    /// A serde/TOML error: keep its message, add the field written on the offending line.
     pub fn toml_error(&self, e: &toml::de::Error) -> SceneError {
         let span = e.span();
-        let field = span.clone().and_then(|s| self.key_on_line_of(s.start));
+        let field = span.clone().and_then(|s| self.field_on_line_of(s.start)).map(|f| f.to_string());
         let message = e.message().trim().replace('\n', " ");
         SceneError {
             path: self.path.to_path_buf(),
@@ -68,32 +69,88 @@ impl Ctx<'_> {
         }
     }
 
-    /// The dotted key written on the line of `offset`, prefixed by the table it sits in.
-    fn key_on_line_of(&self, offset: usize) -> Option<String> {
+    /// The field written on the line of `offset`: its dotted key inside the table the line
+    /// sits in (`wall.1.friction` for a key of the second `[[wall]]`), or that table itself
+    /// when the line is its header.
+    fn field_on_line_of(&self, offset: usize) -> Option<FieldPath> {
         let start = self.text[..offset.min(self.text.len())].rfind('\n').map_or(0, |i| i + 1);
         let line = self.text[start..].lines().next()?;
+        if header(line).is_some() {
+            let end = start + line.len();
+            return Some(table_at(&self.text[..end]));
+        }
         let (key, _) = line.split_once('=')?;
         let key = key.trim();
         let ok = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-');
         if !ok {
             return None;
         }
-        let table = self.text[..start]
-            .lines()
-            .rev()
-            .map(str::trim)
-            .find(|l| l.starts_with('['))
-            .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
-        Some(match table {
-            Some(t) => format!("{t}.{key}"),
-            None => key.to_string(),
-        })
+        let mut field = table_at(&self.text[..start]);
+        for k in key.split('.') {
+            field.push(PathSegment::Key(k.into()));
+        }
+        Some(field)
     }
 
     /// The file a path field names: relative paths are relative to the scene file's directory.
     pub fn file(&self, relative: &str) -> PathBuf {
         self.path.parent().unwrap_or(Path::new(".")).join(relative)
     }
+}
+
+/// The table the end of `text` is in, with the index of every array-of-tables entry on the
+/// way: a `[[name]]` header opens entry n of `name` after n such headers (so `[material.dem]`
+/// after the third `[[material]]` is `material.2.dem`).
+fn table_at(text: &str) -> FieldPath {
+    // Entries so far of every array of tables, by its path (`material`, `material.2.layer`).
+    let mut entries: Vec<(String, usize)> = Vec::new();
+    let mut table = FieldPath::default();
+    for (is_array, keys) in text.lines().filter_map(header) {
+        let mut path = FieldPath::default();
+        for (k, key) in keys.iter().enumerate() {
+            path.push(PathSegment::Key(key.clone()));
+            let name = path.to_string();
+            let seen = entries.iter_mut().find(|(n, _)| *n == name);
+            if is_array && k + 1 == keys.len() {
+                let n = match seen {
+                    Some((_, n)) => {
+                        *n += 1;
+                        *n
+                    }
+                    None => {
+                        entries.push((name, 1));
+                        1
+                    }
+                };
+                path.push(PathSegment::Index(n - 1));
+            } else if let Some((_, n)) = seen {
+                path.push(PathSegment::Index(*n - 1));
+            }
+        }
+        table = path;
+    }
+    table
+}
+
+/// The keys of a table header line (`[domain]`, `[[body]]  # the column`, `[material.dem]`)
+/// and whether it opens an entry of an array of tables; `None` for any other line.
+fn header(line: &str) -> Option<(bool, Vec<String>)> {
+    let line = line.trim();
+    let (is_array, rest) = match line.strip_prefix("[[") {
+        Some(rest) => (true, rest),
+        None => (false, line.strip_prefix('[')?),
+    };
+    let (name, after) = rest.split_once(if is_array { "]]" } else { "]" })?;
+    let after = after.trim_start();
+    if !(after.is_empty() || after.starts_with('#')) {
+        return None;
+    }
+    let keys: Vec<String> = name
+        .split('.')
+        .map(|k| k.trim().trim_matches(|c| c == '"' || c == '\'').to_string())
+        .collect();
+    let bare = |k: &String| !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    keys.iter().all(bare).then_some((is_array, keys))
 }
 
 pub(super) fn vec3(ctx: &Ctx, dim: usize, v: &Spanned<Vec<f64>>, field: &str) -> Result<[f64; 3], SceneError> {
@@ -194,4 +251,63 @@ pub(super) fn positive(ctx: &Ctx, v: &Spanned<f64>, field: &str) -> Result<f64, 
 pub(super) fn non_negative(ctx: &Ctx, v: &Option<Spanned<f64>>, field: &str) -> Result<f64, SceneError> {
     v.as_ref()
         .map_or(Ok(0.0), |v| in_range(ctx, v, field, Bound::Closed(0.0), Bound::None))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{DEM, check_err, edit, line_of, refused};
+
+    #[test]
+    fn serde_errors_name_the_entry_of_a_list_of_tables() {
+        let text = edit(DEM, "friction = 0.3", "friction = \"rough\"");
+        check_err(
+            &text,
+            Some(line_of(&text, "friction = \"rough\"")),
+            "wall.1.friction",
+            "invalid type",
+        );
+        let text = edit(DEM, "normal = [0.0, 1.0]", "normal = [0.0, 1.0]\nbogus = 1");
+        check_err(&text, Some(line_of(&text, "bogus")), "wall.0.bogus", "unknown field");
+    }
+
+    #[test]
+    fn serde_errors_in_a_sub_table_name_the_entry_it_belongs_to() {
+        let text = edit(DEM, "damping = 7.0", "damping = \"x\"");
+        check_err(&text, Some(line_of(&text, "damping")), "material.1.dem.damping", "invalid type");
+        let text = edit(DEM, "density = 2500.0", "density = \"heavy\"");
+        check_err(
+            &text,
+            Some(line_of(&text, "density = \"heavy\"")),
+            "material.0.density",
+            "invalid type",
+        );
+    }
+
+    #[test]
+    fn a_comment_after_a_header_is_not_part_of_the_field() {
+        let text = edit(DEM, "shape = \"box\"", "shape = 3");
+        check_err(&text, Some(line_of(&text, "shape = 3")), "body.0.shape", "invalid type");
+    }
+
+    #[test]
+    fn an_error_on_a_header_line_names_its_table() {
+        let text = edit(DEM, "kind = \"segment\"\n", "");
+        let err = refused(&text);
+        assert!(err.message.contains("missing field `kind`"), "{err}");
+        assert_eq!(err.field.as_deref(), Some("wall.1"), "{err}");
+    }
+
+    #[test]
+    fn a_line_of_a_multiline_array_is_not_a_header() {
+        assert_eq!(super::header("  [0.0, 1.0],"), None);
+        assert_eq!(super::header("[[wall]]  # left"), Some((true, vec!["wall".into()])));
+        assert_eq!(
+            super::header("[ material . dem ]"),
+            Some((false, vec!["material".into(), "dem".into()]))
+        );
+        assert_eq!(
+            super::table_at("[[a]]\n[[a]]\n[[a.b]]\n[[a]]\n[[a.b]]\n[[a.b]]\n").to_string(),
+            "a.2.b.1"
+        );
+    }
 }

@@ -4,6 +4,7 @@ use super::errors::{
     Bound::{self, Closed, Open},
     Ctx, SceneError, in_range, non_negative, positive,
 };
+use super::overrides::FieldPath;
 use super::raw::{RawDemMaterial, RawMaterial, RawMpmMaterial};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -81,18 +82,19 @@ pub struct MpmMaterial {
 pub(super) fn validate(ctx: &Ctx, raw: &[RawMaterial]) -> Result<Vec<Material>, SceneError> {
     let mut materials = Vec::new();
     for (i, m) in raw.iter().enumerate() {
-        let f = |name: &str| format!("material[{i}].{name}");
+        let at = FieldPath::root("material").index(i);
+        let f = |name: &str| format!("{at}.{name}");
         let name = m.name.get_ref().clone();
         if materials.iter().any(|x: &Material| x.name == name) {
             return Err(ctx.err(Some(m.name.span()), Some(&f("name")), format!("material `{name}` is defined twice")));
         }
         let dem = match &m.dem {
             None => None,
-            Some(g) => Some(dem(ctx, g, &|name| format!("material[{i}].dem.{name}"))?),
+            Some(g) => Some(dem(ctx, g, &|name| format!("{at}.dem.{name}"))?),
         };
         let mpm = match &m.mpm {
             None => None,
-            Some(c) => Some(mpm(ctx, c, &|name| format!("material[{i}].mpm.{name}"))?),
+            Some(c) => Some(mpm(ctx, c, &|name| format!("{at}.mpm.{name}"))?),
         };
         materials.push(Material {
             name,
@@ -201,5 +203,18 @@ fn mpm_model(ctx: &Ctx, c: &RawMpmMaterial, f: &dyn Fn(&str) -> String) -> Resul
             Some(&f("model")),
             format!("must be \"drucker_prager\" (Yue 2018) or \"critical_state\" (Chen 2021), got {other:?}"),
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{DEM, check_err, edit, line_of};
+
+    #[test]
+    fn material_errors_name_the_material_and_its_table_by_index() {
+        let text = edit(DEM, "radius = 4e-4", "radius = -4e-4");
+        check_err(&text, Some(line_of(&text, "radius = -4e-4")), "material.1.dem.radius", "> 0");
+        let text = edit(DEM, "name = \"sand\"", "name = \"glass\"");
+        check_err(&text, Some(line_of(DEM, "name = \"sand\"")), "material.1.name", "defined twice");
     }
 }

@@ -24,6 +24,8 @@ mod overrides;
 pub mod raw;
 mod run;
 mod synthetic;
+#[cfg(test)]
+mod testing;
 mod walls;
 
 pub use bodies::{Body, Model, Shape};
@@ -35,6 +37,7 @@ pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel};
 pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
 pub use oracle::{Oracle, OracleKind};
 pub use output::Output;
+pub use overrides::{FieldPath, PathSegment};
 pub use run::Dimension;
 pub use synthetic::{Synthetic, SyntheticContent};
 pub use walls::{Wall, WallShape};
@@ -252,29 +255,8 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
 
 #[cfg(test)]
 mod tests {
+    use super::testing::{DEM, GOOD, check_err};
     use super::*;
-
-    const GOOD: &str = r#"
-schema = 1
-[run]
-dimension = 2
-dt = 1e-4
-steps = 10
-[domain]
-min = [0.0, 0.0]
-max = [1.0, 1.0]
-cell_size = 0.01
-[synthetic]
-dem_nodes = 100
-mpm_nodes = 50
-"#;
-
-    fn check_err(text: &str, line: Option<usize>, field: &str, needle: &str) {
-        let err = from_str(text, Path::new("s.toml"), 0).expect_err("must be refused");
-        assert_eq!(err.line_col.map(|l| l.0), line, "{err}");
-        assert_eq!(err.field.as_deref(), Some(field), "{err}");
-        assert!(err.message.contains(needle), "{err}");
-    }
 
     #[test]
     fn a_good_synthetic_scene_validates() {
@@ -354,5 +336,13 @@ mpm_nodes = 50
     fn duration_gives_the_step_count() {
         let s = from_str(&GOOD.replace("steps = 10", "duration = 0.01"), Path::new("g.toml"), 0).unwrap();
         assert_eq!(s.steps, 100);
+    }
+
+    #[test]
+    fn a_good_dem_scene_validates() {
+        let s = from_str(DEM, Path::new("dem.toml"), 0).unwrap();
+        assert_eq!((s.materials.len(), s.bodies.len(), s.walls.len()), (2, 1, 2));
+        assert_eq!(s.bodies[0].material, 1);
+        assert_eq!(s.participants(), vec![Role::Dem]);
     }
 }

@@ -1,7 +1,70 @@
-//! `--set key=value` overrides, applied to the scene's TOML document before validation.
+//! Field paths and `--set key=value` overrides, applied to the scene's TOML document before
+//! validation.
 
 use super::SceneError;
 use std::path::Path;
+
+/// A field of the scene file as `--set` and every [`SceneError`] spell it: dotted keys, list
+/// entries by index (`material.0.dem.radius`, `body.1.packing`, `wall.0.to`).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub struct FieldPath {
+    segments: Vec<PathSegment>,
+}
+
+/// One step of a [`FieldPath`].
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum PathSegment {
+    /// A key of a table (`domain`, `cell_size`).
+    Key(String),
+    /// An entry of a list (`[[body]]` tables, vector components).
+    Index(usize),
+}
+
+impl FieldPath {
+    /// The path of a top-level key (`FieldPath::root("wall").index(0).key("to")` is `wall.0.to`).
+    pub fn root(key: impl Into<String>) -> FieldPath {
+        FieldPath::default().key(key)
+    }
+
+    pub fn key(mut self, key: impl Into<String>) -> FieldPath {
+        self.segments.push(PathSegment::Key(key.into()));
+        self
+    }
+
+    pub fn index(mut self, index: usize) -> FieldPath {
+        self.segments.push(PathSegment::Index(index));
+        self
+    }
+
+    pub fn push(&mut self, segment: PathSegment) {
+        self.segments.push(segment);
+    }
+
+    pub fn segments(&self) -> &[PathSegment] {
+        &self.segments
+    }
+}
+
+impl std::fmt::Display for PathSegment {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PathSegment::Key(k) => f.write_str(k),
+            PathSegment::Index(i) => write!(f, "{i}"),
+        }
+    }
+}
+
+impl std::fmt::Display for FieldPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (k, segment) in self.segments.iter().enumerate() {
+            if k > 0 {
+                f.write_str(".")?;
+            }
+            write!(f, "{segment}")?;
+        }
+        Ok(())
+    }
+}
 
 /// Applies `--set key=value` overrides (dotted keys, list entries by index: `body.0.max=[0.1,
 /// 0.2]`, values in TOML syntax) to the scene text and returns the edited text.

@@ -1,6 +1,7 @@
 //! `[[wall]]`: boundaries that keep material in, fixed or scripted.
 
 use super::errors::{Bound, Ctx, SceneError, box_corners, in_range, non_negative, positive, vec3};
+use super::overrides::FieldPath;
 use super::raw::RawWall;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -31,7 +32,10 @@ pub struct Wall {
 pub(super) fn validate(ctx: &Ctx, dim: usize, raw: &[RawWall]) -> Result<Vec<Wall>, SceneError> {
     raw.iter()
         .enumerate()
-        .map(|(i, w)| wall(ctx, dim, w, &|name| format!("wall[{i}].{name}")))
+        .map(|(i, w)| {
+            let at = FieldPath::root("wall").index(i);
+            wall(ctx, dim, w, &|name| format!("{at}.{name}"))
+        })
         .collect()
 }
 
@@ -103,4 +107,17 @@ fn shape(ctx: &Ctx, dim: usize, w: &RawWall, f: &dyn Fn(&str) -> String) -> Resu
             ));
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{DEM, check_err, edit, line_of};
+
+    #[test]
+    fn wall_errors_name_the_wall_by_index() {
+        let text = edit(DEM, "to = [0.05, 0.05]", "to = [0.05, 0.05, 0.0]");
+        check_err(&text, Some(line_of(&text, "to = ")), "wall.1.to", "expected 2 components");
+        let text = edit(DEM, "normal = [0.0, 1.0]", "normal = [0.0, 0.0]");
+        check_err(&text, Some(line_of(&text, "normal")), "wall.0.normal", "zero vector");
+    }
 }
