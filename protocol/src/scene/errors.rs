@@ -2,6 +2,7 @@
 //! column, field) and whether it is in range.
 
 use super::overrides::{FieldPath, PathSegment};
+use crate::number;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use toml::Spanned;
@@ -162,7 +163,11 @@ pub(super) fn vec3(ctx: &Ctx, dim: usize, v: &Spanned<Vec<f64>>, field: &str) ->
         ));
     }
     if let Some(x) = v.get_ref().iter().find(|x| !x.is_finite()) {
-        return Err(ctx.err(Some(v.span()), Some(field), format!("components must be finite, got {x}")));
+        return Err(ctx.err(
+            Some(v.span()),
+            Some(field),
+            format!("components must be finite, got {}", number(*x)),
+        ));
     }
     let mut out = [0.0; 3];
     out[..dim].copy_from_slice(v.get_ref());
@@ -199,7 +204,7 @@ pub(super) fn in_range(ctx: &Ctx, v: &Spanned<f64>, field: &str, lo: Bound, hi: 
         Err(ctx.err(
             Some(v.span()),
             Some(field),
-            format!("must be {}{}, got {x}", lo.describe_lo(), hi.describe_hi()),
+            format!("must be {}{}, got {}", lo.describe_lo(), hi.describe_hi(), number(x)),
         ))
     }
 }
@@ -295,6 +300,17 @@ mod tests {
         let err = refused(&text);
         assert!(err.message.contains("missing field `kind`"), "{err}");
         assert_eq!(err.field.as_deref(), Some("wall.1"), "{err}");
+    }
+
+    #[test]
+    fn refused_values_are_echoed_in_short_notation() {
+        let text = edit(DEM, "dt = 1e-5", "dt = -1e308");
+        check_err(&text, Some(line_of(&text, "dt")), "run.dt", "must be > 0, got -1e308");
+        let text = format!("{DEM}[coupling]\nweight = 1e308\n");
+        let err = refused(&text);
+        assert!(err.message.ends_with("must be > 0 and < 1, got 1e308"), "{err}");
+        let text = edit(DEM, "radius = 5e-4", "radius = -2.5e-9");
+        check_err(&text, Some(line_of(&text, "radius")), "material.0.dem.radius", "got -2.5e-9");
     }
 
     #[test]
