@@ -94,9 +94,15 @@ impl Ctx<'_> {
     }
 
     /// The file a path field names: relative paths are relative to the scene file's directory.
-    pub fn file(&self, relative: &str) -> PathBuf {
-        self.path.parent().unwrap_or(Path::new(".")).join(relative)
+    pub fn file(&self, written: &str) -> PathBuf {
+        resolve(self.path, written)
     }
+}
+
+/// The file a path field of the scene at `scene_path` names: relative to the scene file's
+/// directory unless absolute.
+pub(super) fn resolve(scene_path: &Path, written: &str) -> PathBuf {
+    scene_path.parent().unwrap_or(Path::new(".")).join(written)
 }
 
 /// The table the end of `text` is in, with the index of every array-of-tables entry on the

@@ -37,7 +37,7 @@ pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel};
 pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
 pub use oracle::{Oracle, OracleKind};
 pub use output::Output;
-pub use overrides::{FieldPath, PathSegment};
+pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};
 pub use run::Dimension;
 pub use synthetic::{Synthetic, SyntheticContent};
 pub use walls::{Wall, WallShape};
@@ -159,21 +159,77 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 }
 
 /// Reads a scene file, applies `--set key=value` overrides (dotted keys, list entries by
-/// index: `body.0.max=[0.1, 0.2]`, values in TOML syntax) and validates the result. Returns the
-/// scene and the effective text, which is what a run hands to its participants.
+/// index: `body.0.max=[0.1, 0.2]`, values in TOML syntax; see [`Override`]) and validates the
+/// result. Returns the scene and the effective text, which is what a run hands to its
+/// participants: its file paths (`body.N.packing`, `bridge.settings`) are absolute, so that it loads
+/// wherever it is copied. A file without overrides and without relative paths comes back as it
+/// is, with the hash of its bytes.
 pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, String), SceneError> {
     let (text, hash) = read(path)?;
     let scene = from_str(&text, path, hash)?; // the file itself must be sound before it is edited
-    if overrides.is_empty() {
+    let parsed = overrides::parse(path, overrides)?;
+    let mut doc = toml::Value::Table(text.parse::<toml::Table>().map_err(|e| SceneError {
+        path: path.into(),
+        line_col: None,
+        field: None,
+        message: e.message().to_string(),
+    })?);
+    overrides::apply(path, &mut doc, &parsed, overrides)?;
+    let made_absolute = absolute_file_paths(&mut doc, path)?;
+    if parsed.is_empty() && !made_absolute {
         return Ok((scene, text));
     }
-    let text = overrides::apply(path, &text, overrides)?;
+    let text = toml::to_string(&doc).map_err(|e| SceneError {
+        path: path.into(),
+        line_col: None,
+        field: None,
+        message: format!("cannot write the overridden scene: {e}"),
+    })?;
     let scene = from_str(&text, path, hash_bytes(text.as_bytes())).map_err(|mut e| {
-        e.message = format!("{} (after --set {})", e.message, overrides.join(" --set "));
-        e.line_col = None;
+        if !overrides.is_empty() {
+            e.message = format!("{} (after --set {})", e.message, overrides.join(" --set "));
+        }
+        e.line_col = None; // a place in the written text, not in the file
         e
     })?;
     Ok((scene, text))
+}
+
+/// The fields of the schema that name files (relative to the scene file unless absolute):
+/// `body.N.packing` of every body and `bridge.settings`.
+fn file_fields(doc: &toml::Value) -> Vec<FieldPath> {
+    let bodies = doc.get("body").and_then(toml::Value::as_array).map_or(0, Vec::len);
+    (0..bodies)
+        .map(|i| FieldPath::root("body").index(i).key("packing"))
+        .chain([FieldPath::root("bridge").key("settings")])
+        .collect()
+}
+
+/// Makes every relative file path of `doc` absolute, resolved against the directory of the
+/// scene file at `scene_path`; whether there was one.
+fn absolute_file_paths(doc: &mut toml::Value, scene_path: &Path) -> Result<bool, SceneError> {
+    let mut changed = false;
+    for field in file_fields(doc) {
+        let Some(written) = field.get(doc).and_then(toml::Value::as_str) else {
+            continue;
+        };
+        if Path::new(written).is_absolute() {
+            continue;
+        }
+        let file = errors::resolve(scene_path, written);
+        let absolute = std::path::absolute(&file).map_err(|e| SceneError {
+            path: scene_path.into(),
+            line_col: None,
+            field: Some(field.to_string()),
+            message: format!("cannot make {} absolute: {e}", file.display()),
+        })?;
+        let Some(absolute) = absolute.to_str() else { continue }; // TOML text is UTF-8; keep the relative path
+        field
+            .set(doc, toml::Value::String(absolute.into()))
+            .expect("the field holds a value");
+        changed = true;
+    }
+    Ok(changed)
 }
 
 /// Validates scene text; `path` is only used in messages.
@@ -255,7 +311,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
 
 #[cfg(test)]
 mod tests {
-    use super::testing::{DEM, GOOD, check_err};
+    use super::testing::{DEM, GOOD, TempDir, check_err, edit};
     use super::*;
 
     #[test]
@@ -318,10 +374,8 @@ mod tests {
 
     #[test]
     fn overrides_edit_tables_and_list_entries() {
-        let dir = std::env::temp_dir().join(format!("grains-scene-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("s.toml");
-        std::fs::write(&path, GOOD).unwrap();
+        let dir = TempDir::new("overrides");
+        let path = dir.write("s.toml", GOOD);
         let (s, text) = load_with_overrides(&path, &["run.steps=25".into(), "synthetic.dem_nodes = 7".into()]).unwrap();
         assert_eq!((s.steps, s.synthetic.as_ref().unwrap().dem_nodes), (25, 7));
         assert_eq!(s.hash, hash_bytes(text.as_bytes()));
@@ -329,7 +383,57 @@ mod tests {
         assert!(e.message.contains("--set"), "{e}");
         let e = load_with_overrides(&path, &["run.dt.x=1".into()]).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("run.dt.x"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
+        let e = load_with_overrides(&path, &["body.0.model=\"dem\"".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("body.0.model"), "{e}");
+        assert!(e.message.ends_with("index 0 is out of range: the list has 0 entries"), "{e}");
+    }
+
+    #[test]
+    fn relative_file_paths_become_absolute_so_the_text_loads_anywhere() {
+        let (a, b) = (TempDir::new("paths-a"), TempDir::new("paths-b"));
+        let scene = format!(
+            "{}\n[bridge]\nenabled = true\nsettings = \"bridge.toml\"\n",
+            edit(DEM, "shape = \"box\"", "shape = \"box\"\npacking = \"bed.data\"")
+        );
+        let path = a.write("s.toml", &scene);
+        let (packing, settings) = (a.write("bed.data", "0 atoms\n"), a.write("bridge.toml", ""));
+        let (loaded, text) = load_with_overrides(&path, &[]).unwrap();
+        assert_eq!(loaded.hash, hash_bytes(text.as_bytes()));
+        // In B the file's own relative paths find nothing; the effective text's still do.
+        let copy = b.write("s.toml", &text);
+        let e = load(&b.write("as_written.toml", &scene)).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("body.0.packing"), "{e}");
+        let there = from_str(&text, &copy, 0).unwrap();
+        assert_eq!(there.bodies[0].packing.as_deref(), Some(packing.as_path()));
+        assert_eq!(there.bridge.unwrap().settings.as_deref(), Some(settings.as_path()));
+        assert_eq!(loaded.bodies[0].packing.as_deref(), Some(packing.as_path()));
+    }
+
+    #[test]
+    fn a_relative_path_given_by_an_override_is_relative_to_the_scene_file() {
+        let dir = TempDir::new("paths-override");
+        let path = dir.write("s.toml", DEM);
+        let packing = dir.write("bed.data", "0 atoms\n");
+        let (_, text) = load_with_overrides(&path, &["body.0.packing=\"bed.data\"".into()]).unwrap();
+        let there = from_str(&text, Path::new("elsewhere/s.toml"), 0).unwrap();
+        assert_eq!(there.bodies[0].packing.as_deref(), Some(packing.as_path()));
+    }
+
+    #[test]
+    fn a_scene_without_relative_paths_or_overrides_comes_back_as_written() {
+        let dir = TempDir::new("as-written");
+        let packing = dir.write("bed.data", "0 atoms\n");
+        let absolute = format!("packing = {:?}", packing.to_str().unwrap());
+        for text in [
+            DEM.to_string(),
+            edit(DEM, "shape = \"box\"", &format!("shape = \"box\"\n{absolute}")),
+        ] {
+            let path = dir.write("s.toml", &text);
+            let (scene, effective) = load_with_overrides(&path, &[]).unwrap();
+            assert_eq!(effective, text);
+            assert_eq!(scene.hash, hash_bytes(text.as_bytes()));
+            assert_eq!(scene, load(&path).unwrap());
+        }
     }
 
     #[test]

@@ -92,3 +92,29 @@ pub fn check_err(text: &str, line: Option<usize>, field: &str, needle: &str) {
     assert_eq!(err.field.as_deref(), Some(field), "{err}");
     assert!(err.message.contains(needle), "{err}");
 }
+
+/// A fresh directory under the system's temporary one, removed when dropped.
+pub struct TempDir(pub std::path::PathBuf);
+
+impl TempDir {
+    /// `name` must differ between the tests that run at once.
+    pub fn new(name: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!("grains-scene-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("creating a temporary directory");
+        TempDir(dir)
+    }
+
+    /// Writes `text` to `name` in the directory and returns its path.
+    pub fn write(&self, name: &str, text: &str) -> std::path::PathBuf {
+        let path = self.0.join(name);
+        std::fs::write(&path, text).expect("writing a test file");
+        path
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
