@@ -53,7 +53,8 @@ pub const SCHEMA_VERSION: u32 = 1;
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
     pub path: PathBuf,
-    /// Hash of the file bytes: every participant of a run must have loaded the same scene.
+    /// Hash of the scene text (the file's bytes, or the effective text of [`load_with_overrides`]):
+    /// every participant of a run must have loaded the same scene.
     pub hash: u64,
     pub name: String,
     pub dimension: Dimension,
