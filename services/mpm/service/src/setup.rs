@@ -59,7 +59,7 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     for (k, w) in scene.walls.iter().enumerate() {
         if matches!(w.shape, WallShape::Segment { .. }) && scene.dim() == 3 {
             return Err((
-                format!("wall[{k}].kind"),
+                format!("wall.{k}.kind"),
                 "an MPM segment wall is 2D only (a thin rod holds no continuum in 3D): use a \"plane\" or \"box\"".into(),
             ));
         }
@@ -76,7 +76,7 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
         for a in 0..dim {
             if lo[a] < scene.domain.min[a] + margin || hi[a] > scene.domain.max[a] - margin {
                 return Err((
-                    format!("body[{k}]"),
+                    format!("body.{k}"),
                     format!(
                         "MPM material must lie {margin} m (two cells) inside the domain on every side, where the domain's own wall \
                          layers begin: axis {a} of the body spans [{}, {}], the domain [{}, {}]; widen domain.min/max",

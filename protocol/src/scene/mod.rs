@@ -1,0 +1,453 @@
+//! Scene schema v1: TOML in, a validated [`Scene`] out.
+//!
+//! Two levels (ripgrep's low-level/high-level args): [`raw`] mirrors the file with serde
+//! (`deny_unknown_fields`, spans kept for every value that has a range), [`load`] checks
+//! types, ranges and cross-references and derives what the run needs (its participants, its
+//! time owner). Every error names the file, the line and column, the field and what is
+//! allowed; see [`SceneError`]. The format is documented field by field in `scenes/README.md`.
+//!
+//! One module per section of the file validates that section (`run`, `domain`, `materials`,
+//! `bodies`, `walls`, `coupling`, `mpm`, `oracle`, `output`, `bridge`, `synthetic`); the
+//! checks they share are in `errors`, `--set` overrides in `overrides`. Every type is
+//! re-exported here.
+
+mod bodies;
+mod bridge;
+mod coupling;
+mod domain;
+mod errors;
+mod materials;
+mod mpm;
+mod oracle;
+mod output;
+mod overrides;
+pub mod raw;
+mod run;
+mod synthetic;
+#[cfg(test)]
+mod testing;
+mod walls;
+
+pub use bodies::{Body, Model, Shape};
+pub use bridge::SceneBridge;
+pub use coupling::{Coupling, GrainTransfer};
+pub use domain::Domain;
+pub use errors::SceneError;
+pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel};
+pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
+pub use oracle::{Oracle, OracleKind};
+pub use output::Output;
+pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};
+pub use run::Dimension;
+pub use synthetic::{Synthetic, SyntheticContent};
+pub use walls::{Wall, WallShape};
+
+use crate::Role;
+use errors::Ctx;
+use std::path::{Path, PathBuf};
+
+/// The only schema version this build reads.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// A validated scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    pub path: PathBuf,
+    /// Hash of the scene text (the file's bytes, or the effective text of [`load_with_overrides`]):
+    /// every participant of a run must have loaded the same scene.
+    pub hash: u64,
+    pub name: String,
+    pub dimension: Dimension,
+    /// Macro-step [s].
+    pub dt: f64,
+    pub steps: u64,
+    pub seed: u64,
+    /// Worker threads per solver process.
+    pub threads: u32,
+    pub domain: Domain,
+    /// [m/s²]; the third component is 0 in 2D.
+    pub gravity: [f64; 3],
+    pub materials: Vec<Material>,
+    pub bodies: Vec<Body>,
+    pub walls: Vec<Wall>,
+    pub coupling: Coupling,
+    pub mpm: MpmSettings,
+    pub oracle: Option<Oracle>,
+    pub output: Output,
+    /// Start the zenoh bridge with every run (`[bridge] enabled = true`).
+    pub bridge: Option<SceneBridge>,
+    pub synthetic: Option<Synthetic>,
+}
+
+impl Scene {
+    /// The participants this scene needs, in start order; nothing it does not need
+    /// (a DEM-only scene starts no MPM, no coupler, no oracle).
+    pub fn participants(&self) -> Vec<Role> {
+        if let Some(s) = &self.synthetic {
+            return s.participants.clone();
+        }
+        let has = |m: Model| self.bodies.iter().any(|b| b.model == m);
+        let dem = has(Model::Dem) || has(Model::Hybrid);
+        let mpm = has(Model::Mpm) || has(Model::Hybrid);
+        let mut out = Vec::new();
+        if dem {
+            out.push(Role::Dem);
+        }
+        if mpm {
+            out.push(Role::Mpm);
+        }
+        if dem && mpm {
+            out.push(Role::Coupler);
+        }
+        // The oracle publishes the zone field of every coupled run, fixed or adaptive.
+        if dem && mpm {
+            out.push(Role::Oracle);
+        }
+        out
+    }
+
+    /// The participant that owns time: the coupler when there is one, else the only solver.
+    pub fn time_owner(&self) -> Role {
+        let parts = self.participants();
+        if parts.contains(&Role::Coupler) { Role::Coupler } else { parts[0] }
+    }
+
+    /// Number of components that matter in vectors (2 or 3).
+    pub fn dim(&self) -> usize {
+        self.dimension as usize
+    }
+
+    /// Whether the adaptive oracle holds an epoch after macro-step `step` (every
+    /// `oracle.every` steps of a run with a surface oracle and an oracle participant).
+    pub fn epoch_after(&self, step: u64) -> bool {
+        self.oracle
+            .as_ref()
+            .is_some_and(|o| o.kind.adaptive() && step.is_multiple_of(o.every))
+            && self.participants().contains(&Role::Oracle)
+    }
+}
+
+/// FNV-1a of the file bytes.
+pub fn hash_bytes(bytes: &[u8]) -> u64 {
+    bytes
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+/// The text of a scene file and the hash of its bytes.
+fn read(path: &Path) -> Result<(String, u64), SceneError> {
+    let plain = |message: String| SceneError {
+        path: path.to_path_buf(),
+        line_col: None,
+        field: None,
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|e| plain(format!("cannot read the scene file: {e}")))?;
+    let hash = hash_bytes(&bytes);
+    match String::from_utf8(bytes) {
+        Ok(text) => Ok((text, hash)),
+        Err(e) => Err(plain(format!(
+            "not a text file: invalid UTF-8 at byte {} (a scene is a TOML text file)",
+            e.utf8_error().valid_up_to()
+        ))),
+    }
+}
+
+/// Reads and validates a scene file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let (text, hash) = read(path)?;
+    from_str(&text, path, hash)
+}
+
+/// Reads a scene file, applies `--set key=value` overrides (dotted keys, list entries by
+/// index: `body.0.max=[0.1, 0.2]`, values in TOML syntax; see [`Override`]) and validates the
+/// result. Returns the scene and the effective text, which is what a run hands to its
+/// participants: its file paths (`body.N.packing`, `bridge.settings`) are absolute, so that it loads
+/// wherever it is copied. A file without overrides and without relative paths comes back as it
+/// is, with the hash of its bytes.
+pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, String), SceneError> {
+    let (text, hash) = read(path)?;
+    let scene = from_str(&text, path, hash)?; // the file itself must be sound before it is edited
+    let parsed = overrides::parse(path, overrides)?;
+    let mut doc = toml::Value::Table(text.parse::<toml::Table>().map_err(|e| SceneError {
+        path: path.into(),
+        line_col: None,
+        field: None,
+        message: e.message().to_string(),
+    })?);
+    overrides::apply(path, &mut doc, &parsed, overrides)?;
+    let made_absolute = absolute_file_paths(&mut doc, path)?;
+    if parsed.is_empty() && !made_absolute {
+        return Ok((scene, text));
+    }
+    let text = toml::to_string(&doc).map_err(|e| SceneError {
+        path: path.into(),
+        line_col: None,
+        field: None,
+        message: format!("cannot write the overridden scene: {e}"),
+    })?;
+    let scene = from_str(&text, path, hash_bytes(text.as_bytes())).map_err(|mut e| {
+        if !overrides.is_empty() {
+            e.message = format!("{} (after --set {})", e.message, overrides.join(" --set "));
+        }
+        e.line_col = None; // a place in the written text, not in the file
+        e
+    })?;
+    Ok((scene, text))
+}
+
+/// The fields of the schema that name files (relative to the scene file unless absolute):
+/// `body.N.packing` of every body and `bridge.settings`.
+fn file_fields(doc: &toml::Value) -> Vec<FieldPath> {
+    let bodies = doc.get("body").and_then(toml::Value::as_array).map_or(0, Vec::len);
+    (0..bodies)
+        .map(|i| FieldPath::root("body").index(i).key("packing"))
+        .chain([FieldPath::root("bridge").key("settings")])
+        .collect()
+}
+
+/// Makes every relative file path of `doc` absolute, resolved against the directory of the
+/// scene file at `scene_path`; whether there was one.
+fn absolute_file_paths(doc: &mut toml::Value, scene_path: &Path) -> Result<bool, SceneError> {
+    let mut changed = false;
+    for field in file_fields(doc) {
+        let Some(written) = field.get(doc).and_then(toml::Value::as_str) else {
+            continue;
+        };
+        if Path::new(written).is_absolute() {
+            continue;
+        }
+        let file = errors::resolve(scene_path, written);
+        let absolute = std::path::absolute(&file).map_err(|e| SceneError {
+            path: scene_path.into(),
+            line_col: None,
+            field: Some(field.to_string()),
+            message: format!("cannot make {} absolute: {e}", file.display()),
+        })?;
+        let Some(absolute) = absolute.to_str() else { continue }; // TOML text is UTF-8; keep the relative path
+        field
+            .set(doc, toml::Value::String(absolute.into()))
+            .expect("the field holds a value");
+        changed = true;
+    }
+    Ok(changed)
+}
+
+/// Validates scene text; `path` is only used in messages.
+pub fn from_str(text: &str, path: &Path, hash: u64) -> Result<Scene, SceneError> {
+    let ctx = Ctx { text, path };
+    if text.trim().is_empty() {
+        return Err(ctx.err(
+            None,
+            None,
+            format!("the file is empty; a scene needs at least `schema = {SCHEMA_VERSION}`, [run] and [domain] (see scenes/README.md)"),
+        ));
+    }
+    let raw: raw::RawScene = toml::from_str(text).map_err(|e| ctx.toml_error(&e))?;
+    validate(&ctx, raw, hash)
+}
+
+/// Each section in turn (the order decides which of several errors is reported), then what
+/// holds between sections.
+fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneError> {
+    if *raw.schema.get_ref() != SCHEMA_VERSION {
+        return Err(ctx.err(
+            Some(raw.schema.span()),
+            Some("schema"),
+            format!(
+                "this build reads scene schema {SCHEMA_VERSION}, the file says {}",
+                raw.schema.get_ref()
+            ),
+        ));
+    }
+    let run = run::validate(ctx, &raw.run)?;
+    let dim = run.dimension as usize;
+    let domain = domain::validate(ctx, dim, &raw.domain)?;
+    let gravity = run::gravity(ctx, dim, raw.gravity.as_ref())?;
+    let materials = materials::validate(ctx, &raw.material)?;
+    let bodies = bodies::validate(ctx, dim, &raw.body, &materials)?;
+    let walls = walls::validate(ctx, dim, &raw.wall)?;
+    let coupling = coupling::validate(ctx, raw.coupling.as_ref(), domain.cell_size)?;
+    let mpm = mpm::validate(ctx, raw.mpm.as_ref())?;
+    let oracle = oracle::validate(ctx, raw.oracle.as_ref())?;
+    let output = output::validate(raw.output.as_ref());
+    let bridge = bridge::validate(ctx, raw.bridge.as_ref())?;
+    let synthetic = synthetic::validate(ctx, raw.synthetic.as_ref())?;
+    if synthetic.is_none() && bodies.is_empty() {
+        return Err(ctx.err(
+            None,
+            Some("body"),
+            "the scene has no [[body]] of material (and is not a [synthetic] test scene): nothing to simulate".into(),
+        ));
+    }
+    if synthetic.is_some() && !bodies.is_empty() {
+        return Err(ctx.err(
+            None,
+            Some("synthetic"),
+            "a [synthetic] test scene cannot also have [[body]] tables: synthetic rasters never mix with physics".into(),
+        ));
+    }
+    Ok(Scene {
+        path: ctx.path.to_path_buf(),
+        hash,
+        name: run::name(ctx, &raw.run)?,
+        dimension: run.dimension,
+        dt: run.dt,
+        steps: run.steps,
+        seed: run.seed,
+        threads: run.threads,
+        domain,
+        gravity,
+        materials,
+        bodies,
+        walls,
+        coupling,
+        mpm,
+        oracle,
+        output,
+        bridge,
+        synthetic,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::testing::{DEM, GOOD, TempDir, check_err, edit};
+    use super::*;
+
+    #[test]
+    fn a_good_synthetic_scene_validates() {
+        let s = from_str(GOOD, Path::new("dir/good.toml"), 7).unwrap();
+        assert_eq!(s.name, "good");
+        assert_eq!(s.participants(), vec![Role::Dem, Role::Mpm, Role::Coupler]);
+        assert_eq!(s.time_owner(), Role::Coupler);
+        assert_eq!(s.steps, 10);
+    }
+
+    #[test]
+    fn errors_name_line_field_and_allowed_values() {
+        check_err(
+            &GOOD.replace("cell_size = 0.01", "cell_size = -0.01"),
+            Some(10),
+            "domain.cell_size",
+            "> 0",
+        );
+        check_err(
+            &GOOD.replace("steps = 10", "steps = 10\nbogus = 3"),
+            Some(7),
+            "run.bogus",
+            "unknown field",
+        );
+        check_err(&GOOD.replace("dt = 1e-4", "dt = \"fast\""), Some(5), "run.dt", "invalid type");
+        check_err(&GOOD.replace("dimension = 2", "dimension = 4"), Some(4), "run.dimension", "2 or 3");
+        check_err(
+            &GOOD.replace("max = [1.0, 1.0]", "max = [1.0, 1.0, 1.0]"),
+            Some(9),
+            "domain.max",
+            "2 components",
+        );
+        check_err(
+            &GOOD.replace("mpm_nodes = 50", "mpm_nodes = 50\nparticipants = [\"dem\", \"coupler\"]"),
+            Some(14),
+            "synthetic.participants",
+            "allowed sets",
+        );
+        let line = GOOD.lines().count() + 2;
+        check_err(
+            &format!("{GOOD}[coupling]\nquasi_static = -1e-3\n"),
+            Some(line),
+            "coupling.quasi_static",
+            ">= 0",
+        );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"surface\"\ncritical_packing = 1.5\n"),
+            Some(line + 1),
+            "oracle.critical_packing",
+            "< 1",
+        );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"surface\"\nhalf_width = -0.001\n"),
+            Some(line + 1),
+            "oracle.half_width",
+            ">= 0",
+        );
+    }
+
+    #[test]
+    fn overrides_edit_tables_and_list_entries() {
+        let dir = TempDir::new("overrides");
+        let path = dir.write("s.toml", GOOD);
+        let (s, text) = load_with_overrides(&path, &["run.steps=25".into(), "synthetic.dem_nodes = 7".into()]).unwrap();
+        assert_eq!((s.steps, s.synthetic.as_ref().unwrap().dem_nodes), (25, 7));
+        assert_eq!(s.hash, hash_bytes(text.as_bytes()));
+        let e = load_with_overrides(&path, &["run.steps=-3".into()]).unwrap_err();
+        assert!(e.message.contains("--set"), "{e}");
+        let e = load_with_overrides(&path, &["run.dt.x=1".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("run.dt.x"), "{e}");
+        let e = load_with_overrides(&path, &["body.0.model=\"dem\"".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("body.0.model"), "{e}");
+        assert!(e.message.ends_with("index 0 is out of range: the list has 0 entries"), "{e}");
+    }
+
+    #[test]
+    fn relative_file_paths_become_absolute_so_the_text_loads_anywhere() {
+        let (a, b) = (TempDir::new("paths-a"), TempDir::new("paths-b"));
+        let scene = format!(
+            "{}\n[bridge]\nenabled = true\nsettings = \"bridge.toml\"\n",
+            edit(DEM, "shape = \"box\"", "shape = \"box\"\npacking = \"bed.data\"")
+        );
+        let path = a.write("s.toml", &scene);
+        let (packing, settings) = (a.write("bed.data", "0 atoms\n"), a.write("bridge.toml", ""));
+        let (loaded, text) = load_with_overrides(&path, &[]).unwrap();
+        assert_eq!(loaded.hash, hash_bytes(text.as_bytes()));
+        // In B the file's own relative paths find nothing; the effective text's still do.
+        let copy = b.write("s.toml", &text);
+        let e = load(&b.write("as_written.toml", &scene)).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("body.0.packing"), "{e}");
+        let there = from_str(&text, &copy, 0).unwrap();
+        assert_eq!(there.bodies[0].packing.as_deref(), Some(packing.as_path()));
+        assert_eq!(there.bridge.unwrap().settings.as_deref(), Some(settings.as_path()));
+        assert_eq!(loaded.bodies[0].packing.as_deref(), Some(packing.as_path()));
+    }
+
+    #[test]
+    fn a_relative_path_given_by_an_override_is_relative_to_the_scene_file() {
+        let dir = TempDir::new("paths-override");
+        let path = dir.write("s.toml", DEM);
+        let packing = dir.write("bed.data", "0 atoms\n");
+        let (_, text) = load_with_overrides(&path, &["body.0.packing=\"bed.data\"".into()]).unwrap();
+        let there = from_str(&text, Path::new("elsewhere/s.toml"), 0).unwrap();
+        assert_eq!(there.bodies[0].packing.as_deref(), Some(packing.as_path()));
+    }
+
+    #[test]
+    fn a_scene_without_relative_paths_or_overrides_comes_back_as_written() {
+        let dir = TempDir::new("as-written");
+        let packing = dir.write("bed.data", "0 atoms\n");
+        let absolute = format!("packing = {:?}", packing.to_str().unwrap());
+        for text in [
+            DEM.to_string(),
+            edit(DEM, "shape = \"box\"", &format!("shape = \"box\"\n{absolute}")),
+        ] {
+            let path = dir.write("s.toml", &text);
+            let (scene, effective) = load_with_overrides(&path, &[]).unwrap();
+            assert_eq!(effective, text);
+            assert_eq!(scene.hash, hash_bytes(text.as_bytes()));
+            assert_eq!(scene, load(&path).unwrap());
+        }
+    }
+
+    #[test]
+    fn duration_gives_the_step_count() {
+        let s = from_str(&GOOD.replace("steps = 10", "duration = 0.01"), Path::new("g.toml"), 0).unwrap();
+        assert_eq!(s.steps, 100);
+    }
+
+    #[test]
+    fn a_good_dem_scene_validates() {
+        let s = from_str(DEM, Path::new("dem.toml"), 0).unwrap();
+        assert_eq!((s.materials.len(), s.bodies.len(), s.walls.len()), (2, 1, 2));
+        assert_eq!(s.bodies[0].material, 1);
+        assert_eq!(s.participants(), vec![Role::Dem]);
+    }
+}

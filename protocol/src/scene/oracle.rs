@@ -1,0 +1,76 @@
+//! `[oracle]`: who decides where the material is discrete, hybrid or continuum.
+
+use super::errors::{
+    Bound::{self, Closed, Open},
+    Ctx, SceneError, in_range,
+};
+use super::raw::RawOracle;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OracleKind {
+    /// Zones given by the scene, never changed.
+    Fixed,
+    /// Zones from the depth below the top surface of the grains' packing fraction, column by
+    /// column against gravity, every `every` steps (Yue 2018 §4.3: discrete only at the
+    /// visible top; walls, floors and cavities stay continuum).
+    Layered,
+    /// Zones from the distance to the packing-fraction isocontour (Yue 2018 §4).
+    Surface,
+}
+
+impl OracleKind {
+    /// Whether the oracle moves the zones every `every` steps.
+    pub fn adaptive(self) -> bool {
+        matches!(self, OracleKind::Layered | OracleKind::Surface)
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Oracle {
+    pub kind: OracleKind,
+    /// Macro-steps between oracle epochs.
+    pub every: u64,
+    /// `surface`: the packing fraction Φρ of the isocontour the zones are measured from.
+    pub critical_packing: f64,
+    /// `surface`: φ0, the distance inside the isocontour of the hybrid band's centre [m]
+    /// (default `coupling.discrete_layer + hybrid_band / 2`, where the layered zones put it;
+    /// very large: all discrete; very negative: all continuum).
+    pub centre: Option<f64>,
+    /// `surface`: r_h, the band's half-width [m] (default `coupling.hybrid_band / 2`).
+    pub half_width: Option<f64>,
+}
+
+pub(super) fn validate(ctx: &Ctx, raw: Option<&RawOracle>) -> Result<Option<Oracle>, SceneError> {
+    let Some(o) = raw else { return Ok(None) };
+    Ok(Some(Oracle {
+        kind: match o.kind.get_ref().as_str() {
+            "fixed" => OracleKind::Fixed,
+            "layered" => OracleKind::Layered,
+            "surface" => OracleKind::Surface,
+            other => {
+                return Err(ctx.err(
+                    Some(o.kind.span()),
+                    Some("oracle.kind"),
+                    format!("must be one of \"fixed\", \"layered\", \"surface\", got {other:?}"),
+                ));
+            }
+        },
+        every: match &o.every {
+            None => 100,
+            Some(e) if *e.get_ref() >= 1 => *e.get_ref(),
+            Some(e) => return Err(ctx.err(Some(e.span()), Some("oracle.every"), "must be >= 1, got 0".into())),
+        },
+        critical_packing: match &o.critical_packing {
+            None => 0.5,
+            Some(c) => in_range(ctx, c, "oracle.critical_packing", Open(0.0), Open(1.0))?,
+        },
+        centre: match &o.centre {
+            None => None,
+            Some(c) => Some(in_range(ctx, c, "oracle.centre", Bound::None, Bound::None)?),
+        },
+        half_width: match &o.half_width {
+            None => None,
+            Some(c) => Some(in_range(ctx, c, "oracle.half_width", Closed(0.0), Bound::None)?),
+        },
+    }))
+}
