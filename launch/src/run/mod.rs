@@ -158,24 +158,8 @@ pub fn new_run_id() -> String {
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
-    // Participants read the run's copy of the scene: packing and bridge settings files must
-    // not depend on where that copy lies, so their paths become absolute there.
-    let bridge_settings = scene.bridge.as_ref().and_then(|b| b.settings.as_ref());
-    let (scene, text) = if scene.bodies.iter().any(|b| b.packing.is_some()) || bridge_settings.is_some() {
-        let mut overrides = opts.overrides.clone();
-        let absolute = |p: &Path| std::fs::canonicalize(p).with_context(|| format!("resolving {}", p.display()));
-        for (k, b) in scene.bodies.iter().enumerate() {
-            if let Some(p) = &b.packing {
-                overrides.push(format!("body.{k}.packing={:?}", absolute(p)?.display().to_string()));
-            }
-        }
-        if let Some(p) = bridge_settings {
-            overrides.push(format!("bridge.settings={:?}", absolute(p)?.display().to_string()));
-        }
-        scene::load_with_overrides(&opts.scene_path, &overrides)?
-    } else {
-        (scene, text)
-    };
+    // The text has every file path of the scene made absolute: the participants read this
+    // copy of it in the run's directory.
     let roles = scene.participants();
     if scene.synthetic.is_none() {
         check_physics(&scene)?;
