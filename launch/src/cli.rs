@@ -48,6 +48,8 @@ pub enum Cmd {
     },
     /// Pour and settle a DEM scene's grains; save the packing for scenes to reuse.
     Pack(grains_launch::pack::PackArgs),
+    /// Draw a frame of a run to PNG (grains as disks of their radius, material points as dots).
+    Render(grains_launch::render::RenderArgs),
     /// Check a scene file and print what a run of it would start.
     Check { scene: PathBuf },
     /// Validation against reference results: report, pictures, non-zero exit on a failed check.

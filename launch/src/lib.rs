@@ -6,6 +6,7 @@
 //! - [`validate`]: `grains validate`, its registry of parts and the report they write
 //!   ([`report`]: markdown, checks and charts);
 //! - [`bench`]: `grains bench`, figures measured side by side;
+//! - [`render`]: `grains render`, a picture of a frame;
 //! - [`pack`], [`remote`], [`clock`]: `grains pack`, the remote clients' glue, calendar dates.
 //!
 //! Nothing here depends on what depends on it: `validate` and `bench` use `run`, never the
@@ -16,6 +17,7 @@ pub mod clock;
 pub mod metrics;
 pub mod pack;
 pub mod remote;
+pub mod render;
 pub mod report;
 pub mod run;
 pub mod validate;

@@ -27,6 +27,10 @@ fn main() -> ExitCode {
         Cmd::Runs { remote } => remote::list_runs(&remote),
         Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
         Cmd::Check { scene } => run::check(&scene).map(|()| 0),
+        Cmd::Render(args) => grains_launch::render::render(&args).map(|path| {
+            println!("{}", path.display());
+            0
+        }),
         Cmd::Validate(args) => validate::validate(&args).map(|ok| if ok { 0 } else { 1 }),
         Cmd::Bench { what: BenchCmd::Ipc(args) } => bench::ipc::ipc(&args).map(|()| 0),
         Cmd::Bench { what: BenchCmd::Dem(args) } => bench::dem::dem(&args).map(|()| 0),

@@ -516,103 +516,126 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out)?;
     let out = std::fs::canonicalize(&args.out)?;
-    let peer = if args.no_taichi {
-        None
-    } else {
-        let script = args.peers.join("taichi_mpm_bench.py");
-        if !script.exists() {
-            bail!(
-                "{}: no peer program there (pass --peers <shared/peers/mpm> or --no-taichi)",
-                script.display()
-            );
-        }
-        let setup = Path::new(env!("CARGO_MANIFEST_DIR")).join("bench/taichi_venv.sh");
-        let mut cmd = Command::new("bash");
-        cmd.arg(&setup);
-        if let Some(v) = &args.venv {
-            cmd.arg(v);
-        }
-        tracing::info!("bench mpm: making or reusing the taichi venv ({})", setup.display());
-        let o = cmd
-            .stderr(std::process::Stdio::inherit())
-            .output()
-            .context("running taichi_venv.sh")?;
-        let python = String::from_utf8_lossy(&o.stdout).lines().last().unwrap_or("").trim().to_string();
-        if !o.status.success() || python.is_empty() {
-            bail!("setting up taichi failed (see above; --no-taichi runs grains only)");
-        }
-        Some(Taichi {
-            python: PathBuf::from(python),
-            script: std::fs::canonicalize(script)?,
-            out: out.clone(),
-        })
-    };
-
+    let peer = taichi(args, &out)?;
     let mut results: Vec<(&Case, Vec<Run>)> = Vec::new();
     let mut loaded = false;
     for case in CASES
         .iter()
         .filter(|c| args.cases.is_empty() || args.cases.iter().any(|n| n == c.name))
     {
-        let n = case.point_count();
-        if n != case.points {
-            bail!("{}: {n} points, the peer's README has {}", case.name, case.points);
-        }
-        let steps = ((case.steps as f64 * args.steps_scale).round() as usize).max(3);
-        let untimed = case.untimed(args, steps);
-        tracing::info!("bench mpm: {} ({n} points, {untimed} untimed + {steps} timed steps)", case.name);
-        let mut runs = Vec::new();
-        for threads in [1, 2] {
-            loaded |= wait_quiet("bench mpm", args.quiet_wait);
-            let r = if case.dim == 3 {
-                run_grains::<D3>(case, threads, untimed, steps)
-            } else {
-                run_grains::<D2>(case, threads, untimed, steps)
-            }
-            .unwrap_or_else(|e| Run::failed("grains", "PIC/FLIP 0.95 f64", threads, steps, &e));
-            match &r.failed {
-                None => tracing::info!(
-                    "bench mpm:   grains, {threads} thread(s): {:.4} µs/pt-step wall, {:.4} CPU",
-                    r.wall_us,
-                    r.cpu_us
-                ),
-                Some(e) => tracing::warn!("bench mpm:   grains, {threads} thread(s): FAILED: {e}"),
-            }
-            runs.push(r);
-        }
-        if let Some(taichi) = &peer {
-            let mut todo = vec![(Peer::Flip64, 1), (Peer::Flip64, 2)];
-            if !args.no_apic {
-                todo.push((Peer::Apic32, 1));
-            }
-            for (p, threads) in todo {
-                loaded |= wait_quiet("bench mpm", args.quiet_wait);
-                let r = run_taichi(taichi, case, p, threads, args, steps)
-                    .unwrap_or_else(|e| Run::failed("taichi", p.variant(), threads, steps, &e));
-                match &r.failed {
-                    None => tracing::info!(
-                        "bench mpm:   {} {}, {threads} thread(s): {:.4} µs/pt-step wall, {:.4} CPU",
-                        r.code,
-                        r.variant,
-                        r.wall_us,
-                        r.cpu_us
-                    ),
-                    Some(e) => tracing::warn!("bench mpm:   taichi {}, {threads} thread(s): FAILED: {e}", r.variant),
-                }
-                runs.push(r);
-            }
-        }
+        let (runs, busy) = run_case(args, case, peer.as_ref())?;
+        loaded |= busy;
         results.push((case, runs));
     }
-
     let text = report(args, &results, loaded);
     println!("{text}");
     outputs::write_atomic(&out.join("mpm.md"), text.as_bytes())?;
+    write_data(&out, &results)?;
+    tracing::info!(
+        "bench mpm: table, CSV and raw JSON lines written to {}/mpm.{{md,csv,jsonl}}",
+        out.display()
+    );
+    if results.iter().flat_map(|(_, r)| r).any(|r| !r.sane) {
+        bail!("a run failed or ended with points not finite or outside the box (see the table)");
+    }
+    Ok(())
+}
+
+/// The peer: the Taichi program in a venv made once (none with `--no-taichi`).
+fn taichi(args: &MpmArgs, out: &Path) -> anyhow::Result<Option<Taichi>> {
+    if args.no_taichi {
+        return Ok(None);
+    }
+    let script = args.peers.join("taichi_mpm_bench.py");
+    if !script.exists() {
+        bail!(
+            "{}: no peer program there (pass --peers <shared/peers/mpm> or --no-taichi)",
+            script.display()
+        );
+    }
+    let setup = Path::new(env!("CARGO_MANIFEST_DIR")).join("bench/taichi_venv.sh");
+    let mut cmd = Command::new("bash");
+    cmd.arg(&setup);
+    if let Some(v) = &args.venv {
+        cmd.arg(v);
+    }
+    tracing::info!("bench mpm: making or reusing the taichi venv ({})", setup.display());
+    let o = cmd
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .context("running taichi_venv.sh")?;
+    let python = String::from_utf8_lossy(&o.stdout).lines().last().unwrap_or("").trim().to_string();
+    if !o.status.success() || python.is_empty() {
+        bail!("setting up taichi failed (see above; --no-taichi runs grains only)");
+    }
+    Ok(Some(Taichi {
+        python: PathBuf::from(python),
+        script: std::fs::canonicalize(script)?,
+        out: out.to_path_buf(),
+    }))
+}
+
+/// One case: grains on 1 and 2 threads, then the peer's runs; whether the machine was busy.
+fn run_case(args: &MpmArgs, case: &Case, peer: Option<&Taichi>) -> anyhow::Result<(Vec<Run>, bool)> {
+    let mut loaded = false;
+    let n = case.point_count();
+    if n != case.points {
+        bail!("{}: {n} points, the peer's README has {}", case.name, case.points);
+    }
+    let steps = ((case.steps as f64 * args.steps_scale).round() as usize).max(3);
+    let untimed = case.untimed(args, steps);
+    tracing::info!("bench mpm: {} ({n} points, {untimed} untimed + {steps} timed steps)", case.name);
+    let mut runs = Vec::new();
+    for threads in [1, 2] {
+        loaded |= wait_quiet("bench mpm", args.quiet_wait);
+        let r = if case.dim == 3 {
+            run_grains::<D3>(case, threads, untimed, steps)
+        } else {
+            run_grains::<D2>(case, threads, untimed, steps)
+        }
+        .unwrap_or_else(|e| Run::failed("grains", "PIC/FLIP 0.95 f64", threads, steps, &e));
+        match &r.failed {
+            None => tracing::info!(
+                "bench mpm:   grains, {threads} thread(s): {:.4} µs/pt-step wall, {:.4} CPU",
+                r.wall_us,
+                r.cpu_us
+            ),
+            Some(e) => tracing::warn!("bench mpm:   grains, {threads} thread(s): FAILED: {e}"),
+        }
+        runs.push(r);
+    }
+    if let Some(taichi) = peer {
+        let mut todo = vec![(Peer::Flip64, 1), (Peer::Flip64, 2)];
+        if !args.no_apic {
+            todo.push((Peer::Apic32, 1));
+        }
+        for (p, threads) in todo {
+            loaded |= wait_quiet("bench mpm", args.quiet_wait);
+            let r = run_taichi(taichi, case, p, threads, args, steps)
+                .unwrap_or_else(|e| Run::failed("taichi", p.variant(), threads, steps, &e));
+            match &r.failed {
+                None => tracing::info!(
+                    "bench mpm:   {} {}, {threads} thread(s): {:.4} µs/pt-step wall, {:.4} CPU",
+                    r.code,
+                    r.variant,
+                    r.wall_us,
+                    r.cpu_us
+                ),
+                Some(e) => tracing::warn!("bench mpm:   taichi {}, {threads} thread(s): FAILED: {e}", r.variant),
+            }
+            runs.push(r);
+        }
+    }
+    Ok((runs, loaded))
+}
+
+/// `mpm.csv` (one row per run) and `mpm.jsonl` (each run's raw figures).
+fn write_data(out: &Path, results: &[(&Case, Vec<Run>)]) -> anyhow::Result<()> {
     let mut csv = String::from(
         "case,dim,points,code,variant,threads,steps,wall_us_per_point_step,cpu_us_per_point_step,share_p2g,share_grid,share_g2p,share_constitutive,finite_in_box,other_load_cores\n",
     );
     let mut jsonl = String::new();
-    for (case, runs) in &results {
+    for (case, runs) in results {
         for r in runs {
             let s = r.shares.map(|s| s.map_or(String::new(), |s| format!("{s:.4}")));
             let _ = writeln!(
@@ -642,13 +665,6 @@ pub fn mpm(args: &MpmArgs) -> anyhow::Result<()> {
     }
     outputs::write_atomic(&out.join("mpm.csv"), csv.as_bytes())?;
     outputs::write_atomic(&out.join("mpm.jsonl"), jsonl.as_bytes())?;
-    tracing::info!(
-        "bench mpm: table, CSV and raw JSON lines written to {}/mpm.{{md,csv,jsonl}}",
-        out.display()
-    );
-    if results.iter().flat_map(|(_, r)| r).any(|r| !r.sane) {
-        bail!("a run failed or ended with points not finite or outside the box (see the table)");
-    }
     Ok(())
 }
 
@@ -674,84 +690,9 @@ fn report(args: &MpmArgs, results: &[(&Case, Vec<Run>)], loaded: bool) -> String
     t.push_str("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     let mut targets = String::new();
     for (case, runs) in results {
-        let find = |grains: bool, variant: &str, threads: usize| {
-            runs.iter()
-                .find(|r| r.is_grains() == grains && r.variant == variant && r.threads == threads && r.failed.is_none())
-        };
-        for r in runs {
-            let ratio = if r.is_grains() {
-                find(false, "PIC/FLIP 0.95 f64", r.threads).map_or("–".into(), |p| {
-                    format!("{:.2}× ({:.2}×)", p.wall_us / r.wall_us, p.cpu_us / r.cpu_us)
-                })
-            } else {
-                "–".into()
-            };
-            let speedup = if r.threads == 2 {
-                find(r.is_grains(), r.variant, 1).map_or("–".into(), |one| format!("{:.2}×", one.wall_us / r.wall_us))
-            } else {
-                "–".into()
-            };
-            let constitutive = if r.is_grains() { pct(r.shares[3]) } else { "(in P2G)".into() };
-            let code = if r.is_grains() {
-                format!("grains {}", r.variant)
-            } else {
-                format!("{} {}", r.code, r.variant)
-            };
-            if let Some(e) = &r.failed {
-                let _ = writeln!(
-                    t,
-                    "| {} | {} | {code} | {} | {} | failed: {} | | | | | | | | – |",
-                    case.name,
-                    case.point_count(),
-                    r.threads,
-                    r.steps,
-                    e.replace('|', "/"),
-                );
-                continue;
-            }
-            let _ = writeln!(
-                t,
-                "| {} | {} | {code} | {} | {} | {:.4} | {:.4} | {ratio} | {speedup} | {} | {} | {} | {constitutive} | {:.2} |{}",
-                case.name,
-                case.point_count(),
-                r.threads,
-                r.steps,
-                r.wall_us,
-                r.cpu_us,
-                pct(r.shares[0]),
-                pct(r.shares[1]),
-                pct(r.shares[2]),
-                r.load,
-                if r.sane { "" } else { " NOT FINITE / LEFT THE BOX" }
-            );
-        }
-        // The issue's targets: ≥ 1.5× Taichi PIC/FLIP f64 on 1 thread (≤ 0.18 µs in 2D, ≤ 1.1 µs
-        // in 3D), ≥ 1.8× from 2 threads on the largest case.
-        if let Some(g1) = find(true, "PIC/FLIP 0.95 f64", 1) {
-            let limit = if case.dim == 2 { 0.18 } else { 1.1 };
-            let peer = find(false, "PIC/FLIP 0.95 f64", 1).map_or(String::new(), |p| {
-                let x = p.wall_us / g1.wall_us;
-                format!(", {x:.2}× Taichi here (≥ 1.5×: {})", if x >= 1.5 { "met" } else { "not met" })
-            });
-            let _ = writeln!(
-                targets,
-                "- {}: grains 1 thread {:.3} µs/pt-step wall (≤ {limit}: {}){peer}",
-                case.name,
-                g1.wall_us,
-                if g1.wall_us <= limit { "met" } else { "not met" }
-            );
-            if case.name == "3d-1.1m"
-                && let Some(g2) = find(true, "PIC/FLIP 0.95 f64", 2)
-            {
-                let s = g1.wall_us / g2.wall_us;
-                let _ = writeln!(
-                    targets,
-                    "- {}: grains 2 threads ÷ 1 thread {s:.2}× wall (≥ 1.8×: {})",
-                    case.name,
-                    if s >= 1.8 { "met" } else { "not met" }
-                );
-            }
-        }
+        table_rows(&mut t, case, runs);
+        target_lines(&mut targets, case, runs);
+
     }
     t.push_str("\nTargets (issue): 1 thread ≥ 1.5× faster than Taichi PIC/FLIP f64 (≤ 0.18 µs/pt-step in 2D, ≤ 1.1 in 3D), 2 threads ≥ 1.8× faster than 1 on the largest case.\n\n");
     t.push_str(&targets);
@@ -824,6 +765,96 @@ fn report(args: &MpmArgs, results: &[(&Case, Vec<Run>)], loaded: bool) -> String
         peer_dt(1.0 / 64.0),
     );
     t
+}
+
+/// The grains or Taichi run of a case with `variant` on `threads`, if it did not fail.
+fn find<'a>(runs: &'a [Run], grains: bool, variant: &str, threads: usize) -> Option<&'a Run> {
+    runs.iter()
+        .find(|r| r.is_grains() == grains && r.variant == variant && r.threads == threads && r.failed.is_none())
+}
+
+/// One table row per run of a case.
+fn table_rows(t: &mut String, case: &Case, runs: &[Run]) {
+    let find = |grains: bool, variant: &str, threads: usize| find(runs, grains, variant, threads);
+    for r in runs {
+        let ratio = if r.is_grains() {
+            find(false, "PIC/FLIP 0.95 f64", r.threads).map_or("–".into(), |p| {
+                format!("{:.2}× ({:.2}×)", p.wall_us / r.wall_us, p.cpu_us / r.cpu_us)
+            })
+        } else {
+            "–".into()
+        };
+        let speedup = if r.threads == 2 {
+            find(r.is_grains(), r.variant, 1).map_or("–".into(), |one| format!("{:.2}×", one.wall_us / r.wall_us))
+        } else {
+            "–".into()
+        };
+        let constitutive = if r.is_grains() { pct(r.shares[3]) } else { "(in P2G)".into() };
+        let code = if r.is_grains() {
+            format!("grains {}", r.variant)
+        } else {
+            format!("{} {}", r.code, r.variant)
+        };
+        if let Some(e) = &r.failed {
+            let _ = writeln!(
+                t,
+                "| {} | {} | {code} | {} | {} | failed: {} | | | | | | | | – |",
+                case.name,
+                case.point_count(),
+                r.threads,
+                r.steps,
+                e.replace('|', "/"),
+            );
+            continue;
+        }
+        let _ = writeln!(
+            t,
+            "| {} | {} | {code} | {} | {} | {:.4} | {:.4} | {ratio} | {speedup} | {} | {} | {} | {constitutive} | {:.2} |{}",
+            case.name,
+            case.point_count(),
+            r.threads,
+            r.steps,
+            r.wall_us,
+            r.cpu_us,
+            pct(r.shares[0]),
+            pct(r.shares[1]),
+            pct(r.shares[2]),
+            r.load,
+            if r.sane { "" } else { " NOT FINITE / LEFT THE BOX" }
+        );
+    }
+}
+
+/// Whether the case met the targets.
+fn target_lines(targets: &mut String, case: &Case, runs: &[Run]) {
+    let find = |grains: bool, variant: &str, threads: usize| find(runs, grains, variant, threads);
+    // The issue's targets: ≥ 1.5× Taichi PIC/FLIP f64 on 1 thread (≤ 0.18 µs in 2D, ≤ 1.1 µs
+    // in 3D), ≥ 1.8× from 2 threads on the largest case.
+    if let Some(g1) = find(true, "PIC/FLIP 0.95 f64", 1) {
+        let limit = if case.dim == 2 { 0.18 } else { 1.1 };
+        let peer = find(false, "PIC/FLIP 0.95 f64", 1).map_or(String::new(), |p| {
+            let x = p.wall_us / g1.wall_us;
+            format!(", {x:.2}× Taichi here (≥ 1.5×: {})", if x >= 1.5 { "met" } else { "not met" })
+        });
+        let _ = writeln!(
+            targets,
+            "- {}: grains 1 thread {:.3} µs/pt-step wall (≤ {limit}: {}){peer}",
+            case.name,
+            g1.wall_us,
+            if g1.wall_us <= limit { "met" } else { "not met" }
+        );
+        if case.name == "3d-1.1m"
+            && let Some(g2) = find(true, "PIC/FLIP 0.95 f64", 2)
+        {
+            let s = g1.wall_us / g2.wall_us;
+            let _ = writeln!(
+                targets,
+                "- {}: grains 2 threads ÷ 1 thread {s:.2}× wall (≥ 1.8×: {})",
+                case.name,
+                if s >= 1.8 { "met" } else { "not met" }
+            );
+        }
+    }
 }
 
 #[cfg(test)]

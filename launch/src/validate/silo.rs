@@ -174,10 +174,34 @@ pub fn run_silo(
         Some(v) => v.iter().sum::<f64>() / v.len().max(1) as f64,
         None => 0.0,
     };
+    let (discharged, flying) = discharge(&outcome.dir, orifice)?;
+    let window: Vec<(f64, f64)> = discharged
+        .iter()
+        .copied()
+        .filter(|p| (WINDOW.0..=WINDOW.1).contains(&p.0))
+        .collect();
+    let tail: Vec<(f64, f64)> = discharged.iter().copied().filter(|p| p.0 >= duration - CLOG_TAIL - 1e-9).collect();
+    Ok(SiloRun {
+        model,
+        orifice,
+        restitution,
+        rate: slope(&window),
+        tail_rate: slope(&tail),
+        flying,
+        discharged,
+        grains,
+        wall: table.last("wall_s")?,
+        dir: outcome.dir,
+    })
+}
+
+/// The mass below the silo's bottom in every frame of a run, and the share of the bin's
+/// grains in flight over the fit window's frames.
+fn discharge(dir: &Path, orifice: f64) -> anyhow::Result<(Vec<(f64, f64)>, f64)> {
     let mut discharged = Vec::new();
     let (mut flown, mut counted) = (0usize, 0usize);
-    let grain_frames = frames_of(&outcome.dir, "grains")?;
-    let point_frames = frames_of(&outcome.dir, "points")?;
+    let grain_frames = frames_of(dir, "grains")?;
+    let point_frames = frames_of(dir, "points")?;
     let times: Vec<f64> = if grain_frames.is_empty() {
         point_frames.iter().map(|f| f.0).collect()
     } else {
@@ -207,34 +231,27 @@ pub fn run_silo(
         }
         discharged.push((t, below));
     }
-    let window: Vec<(f64, f64)> = discharged
-        .iter()
-        .copied()
-        .filter(|p| (WINDOW.0..=WINDOW.1).contains(&p.0))
-        .collect();
-    let tail: Vec<(f64, f64)> = discharged.iter().copied().filter(|p| p.0 >= duration - CLOG_TAIL - 1e-9).collect();
-    Ok(SiloRun {
-        model,
-        orifice,
-        restitution,
-        rate: slope(&window),
-        tail_rate: slope(&tail),
-        flying: if counted > 0 { flown as f64 / counted as f64 } else { 0.0 },
-        discharged,
-        grains,
-        wall: table.last("wall_s")?,
-        dir: outcome.dir,
-    })
+    Ok((discharged, if counted > 0 { flown as f64 / counted as f64 } else { 0.0 }))
 }
 
-/// Runs the silo part and writes `silo.md` and `silo.csv` in `--out`; whether every check passed.
-pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
-    let mut part = Part::default();
-    let packing = packings::silo(args)?;
-    let scene = load_with(&args.scenes.join(SCENE), &[])?;
-    let material = &scene.materials[0];
-    let bulk = material.density * material.mpm.as_ref().map_or(1.0, |m| m.packing);
-    let g = scene.gravity[1].abs();
+/// The runs of the silo part: every model at every orifice, then (full runs) the clogging
+/// orifice and the restitution-0 runs.
+struct Runs {
+    orifices: Vec<f64>,
+    models: Vec<Model>,
+    /// Every model at every orifice.
+    runs: Vec<SiloRun>,
+    /// The clogging orifice and the bouncing runs with restitution 0.
+    extra: Vec<SiloRun>,
+}
+
+impl Runs {
+    fn rate(&self, m: Model, w: f64) -> Option<f64> {
+        self.runs.iter().find(|r| r.model == m && r.orifice == w).map(|r| r.rate)
+    }
+}
+
+fn run_all(args: &ValidateArgs, packing: &Path) -> anyhow::Result<Runs> {
     let (orifices, models): (Vec<f64>, Vec<Model>) = if args.quick {
         (vec![REFERENCE], vec![Model::Dem, Model::Hybrid])
     } else {
@@ -244,7 +261,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     for &w in &orifices {
         for &m in &models {
             tracing::info!("validate: silo, orifice {:.0} mm: {}", w * 1e3, m.name());
-            let r = run_silo(args, SCENE, &packing, m, Some(w), None, &[])?;
+            let r = run_silo(args, SCENE, packing, m, Some(w), None, &[])?;
             tracing::info!("validate: silo {} w = {:.0} mm: rate {:.3} kg/(m s)", m.name(), w * 1e3, r.rate);
             runs.push(r);
         }
@@ -253,15 +270,43 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     if !args.quick {
         for &m in &models {
             tracing::info!("validate: silo, orifice {:.0} mm (clogging): {}", CLOG_ORIFICE * 1e3, m.name());
-            extra.push(run_silo(args, SMALL_SCENE, &packing, m, None, None, &[])?);
+            extra.push(run_silo(args, SMALL_SCENE, packing, m, None, None, &[])?);
         }
         for m in [Model::Dem, Model::Hybrid] {
             tracing::info!("validate: silo, restitution 0: {}", m.name());
-            extra.push(run_silo(args, SCENE, &packing, m, Some(REFERENCE), Some(0.0), &[])?);
+            extra.push(run_silo(args, SCENE, packing, m, Some(REFERENCE), Some(0.0), &[])?);
         }
     }
-    let rate = |m: Model, w: f64| runs.iter().find(|r| r.model == m && r.orifice == w).map(|r| r.rate);
+    Ok(Runs {
+        orifices,
+        models,
+        runs,
+        extra,
+    })
+}
+
+/// Runs the silo part and writes `silo.csv` in `--out`.
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
+    let packing = packings::silo(args)?;
+    let scene = load_with(&args.scenes.join(SCENE), &[])?;
+    let all = run_all(args, &packing)?;
     let mut md = String::new();
+    rates_section(&mut md, &mut part, &scene, &all)?;
+    if all.orifices.len() >= 4 {
+        beverloo_section(&mut md, &mut part, args, &scene, &all)?;
+    }
+    clogging_section(&mut md, &mut part, &all)?;
+    bouncing_section(&mut md, &scene, &all)?;
+    discharge_outputs(&mut md, &mut part, args, &all)?;
+    part.md = md;
+    Ok(part)
+}
+
+/// The discharge rates against the DEM's, and the check at the reference orifice.
+fn rates_section(md: &mut String, part: &mut Part, scene: &grains_protocol::scene::Scene, all: &Runs) -> anyhow::Result<()> {
+    let runs = &all.runs;
+    let rate = |m: Model, w: f64| all.rate(m, w);
     writeln!(md, "## Silo discharge: DEM, hybrid (adaptive zones), MPM\n")?;
     writeln!(
         md,
@@ -278,7 +323,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         "| orifice | model | W [kg/(m s)] | vs DEM | mean DEM grains | wall [s] | speedup vs DEM | check |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|")?;
-    for r in &runs {
+    for r in runs {
         let dem = rate(Model::Dem, r.orifice).unwrap_or(f64::NAN);
         let dem_wall = runs
             .iter()
@@ -315,60 +360,74 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             dem_wall / r.wall
         )?;
     }
-    if orifices.len() >= 4 {
+    Ok(())
+}
+
+/// Beverloo fits over the flowing orifices, per model, with their chart.
+fn beverloo_section(md: &mut String, part: &mut Part, args: &ValidateArgs, scene: &grains_protocol::scene::Scene, all: &Runs) -> anyhow::Result<()> {
+    let material = &scene.materials[0];
+    let bulk = material.density * material.mpm.as_ref().map_or(1.0, |m| m.packing);
+    let g = scene.gravity[1].abs();
+    let (orifices, models) = (&all.orifices, &all.models);
+    let rate = |m: Model, w: f64| all.rate(m, w);
+        writeln!(
+        md,
+        "\n### Beverloo fits (2D: W = C ρ_b √g (w − k d)^{{3/2}}, ρ_b = {bulk:.0} kg/m³, d = 1 mm)\n"
+    )?;
+    writeln!(md, "| model | C | k | largest misfit of the fit |")?;
+    writeln!(md, "|---|---|---|---|")?;
+    let mut chart = Chart {
+        title: "Silo: Beverloo plot".into(),
+        x_label: "orifice w [mm]".into(),
+        y_label: "W^(2/3) [(kg/(m s))^(2/3)]".into(),
+        ..Chart::default()
+    };
+    for &m in models {
+        // Clogged orifices are outside Beverloo's law.
+        let pts: Vec<(f64, f64)> = orifices
+            .iter()
+            .filter_map(|&w| rate(m, w).map(|q| (w, q)))
+            .filter(|p| p.1 > 0.0)
+            .collect();
+        if pts.len() < 3 {
+            writeln!(md, "| {} | – | – | {} flowing orifices: no fit |", m.name(), pts.len())?;
+            continue;
+        }
+        let (c, k, worst) = beverloo(&pts, bulk, g);
+        // 2D Beverloo: W^(2/3) = (C ρ_b √g)^(2/3) (w − k d), a line in w.
+        let slope = (c * bulk * g.sqrt()).powf(2.0 / 3.0);
+        chart.series.push(Series::new(
+            m.name(),
+            Kind::Points,
+            pts.iter().map(|p| (p.0 * 1e3, p.1.powf(2.0 / 3.0))).collect(),
+        ));
+        let ends = [k * D, ORIFICES[ORIFICES.len() - 1]];
+        chart.series.push(Series::new(
+            format!("{} fit C = {c:.2}, k = {k:.2}", m.name()),
+            Kind::Dashed,
+            ends.iter().map(|&w| (w * 1e3, slope * (w - k * D))).collect(),
+        ));
         writeln!(
             md,
-            "\n### Beverloo fits (2D: W = C ρ_b √g (w − k d)^{{3/2}}, ρ_b = {bulk:.0} kg/m³, d = 1 mm)\n"
-        )?;
-        writeln!(md, "| model | C | k | largest misfit of the fit |")?;
-        writeln!(md, "|---|---|---|---|")?;
-        let mut chart = Chart {
-            title: "Silo: Beverloo plot".into(),
-            x_label: "orifice w [mm]".into(),
-            y_label: "W^(2/3) [(kg/(m s))^(2/3)]".into(),
-            ..Chart::default()
-        };
-        for &m in &models {
-            // Clogged orifices are outside Beverloo's law.
-            let pts: Vec<(f64, f64)> = orifices
-                .iter()
-                .filter_map(|&w| rate(m, w).map(|q| (w, q)))
-                .filter(|p| p.1 > 0.0)
-                .collect();
-            if pts.len() < 3 {
-                writeln!(md, "| {} | – | – | {} flowing orifices: no fit |", m.name(), pts.len())?;
-                continue;
-            }
-            let (c, k, worst) = beverloo(&pts, bulk, g);
-            // 2D Beverloo: W^(2/3) = (C ρ_b √g)^(2/3) (w − k d), a line in w.
-            let slope = (c * bulk * g.sqrt()).powf(2.0 / 3.0);
-            chart.series.push(Series::new(
-                m.name(),
-                Kind::Points,
-                pts.iter().map(|p| (p.0 * 1e3, p.1.powf(2.0 / 3.0))).collect(),
-            ));
-            let ends = [k * D, ORIFICES[ORIFICES.len() - 1]];
-            chart.series.push(Series::new(
-                format!("{} fit C = {c:.2}, k = {k:.2}", m.name()),
-                Kind::Dashed,
-                ends.iter().map(|&w| (w * 1e3, slope * (w - k * D))).collect(),
-            ));
-            writeln!(
-                md,
-                "| {} | {c:.3} | {k:.2} | {:.1}% ({} orifices) |",
-                m.name(),
-                100.0 * worst,
-                pts.len()
-            )?;
-        }
-        part.chart(
-            &args.out,
-            "silo_beverloo",
-            "Silo discharge rates in Beverloo's coordinates, with the fits",
-            &chart,
+            "| {} | {c:.3} | {k:.2} | {:.1}% ({} orifices) |",
+            m.name(),
+            100.0 * worst,
+            pts.len()
         )?;
     }
-    let clogs: Vec<&SiloRun> = extra.iter().filter(|r| r.orifice == CLOG_ORIFICE).collect();
+    part.chart(
+        &args.out,
+        "silo_beverloo",
+        "Silo discharge rates in Beverloo's coordinates, with the fits",
+        &chart,
+    )?;
+    Ok(())
+}
+
+/// Clogging at a 3-d orifice: grains clog, a continuum flows (checked).
+fn clogging_section(md: &mut String, part: &mut Part, all: &Runs) -> anyhow::Result<()> {
+    let rate = |m: Model, w: f64| all.rate(m, w);
+    let clogs: Vec<&SiloRun> = all.extra.iter().filter(|r| r.orifice == CLOG_ORIFICE).collect();
     if !clogs.is_empty() {
         writeln!(
             md,
@@ -415,6 +474,12 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             )?;
         }
     }
+    Ok(())
+}
+
+/// The share of grains in flight in the bin, with the scene's restitution and with 0.
+fn bouncing_section(md: &mut String, scene: &grains_protocol::scene::Scene, all: &Runs) -> anyhow::Result<()> {
+    let material = &scene.materials[0];
     writeln!(md, "\n### Bouncing grains (w = {:.0} mm)\n", REFERENCE * 1e3)?;
     writeln!(
         md,
@@ -427,14 +492,21 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         Some(grains_protocol::scene::DemDamping::Viscous(g)) => format!("γ = {g} N s/m"),
         None => String::from("?"),
     };
-    for r in runs
+    for r in all
+        .runs
         .iter()
-        .chain(&extra)
+        .chain(&all.extra)
         .filter(|r| r.orifice == REFERENCE && r.model != Model::Mpm)
     {
         let e = r.restitution.map_or(e0.clone(), |e| e.to_string());
         writeln!(md, "| {} | {e} | {:.2}% |", r.model.name(), 100.0 * r.flying)?;
     }
+    Ok(())
+}
+
+/// The discharge chart, the table of what each run simulates and `silo.csv`.
+fn discharge_outputs(md: &mut String, part: &mut Part, args: &ValidateArgs, all: &Runs) -> anyhow::Result<()> {
+    let runs = &all.runs;
     let mut chart = Chart {
         title: format!("Silo, {:.0} mm orifice: mass discharged", REFERENCE * 1e3),
         x_label: "time [s]".into(),
@@ -448,7 +520,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let dem = runs.iter().find(|r| r.orifice == REFERENCE && r.model == Model::Dem);
     let hybrid = runs.iter().find(|r| r.orifice == REFERENCE && r.model == Model::Hybrid);
     if let (Some(d), Some(h)) = (dem, hybrid) {
-        let row = scene_use(args, &mut part, "silo_use", SCENE, &h.dir, &d.dir)?;
+        let row = scene_use(args, part, "silo_use", SCENE, &h.dir, &d.dir)?;
         writeln!(
             md,
             "\n### What each run simulates ({:.0} mm)\n\n{}\n{row}",
@@ -457,7 +529,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         )?;
     }
     let mut csv = String::from("model,orifice_m,restitution,time_s,discharged_kg_per_m\n");
-    for r in runs.iter().chain(&extra) {
+    for r in runs.iter().chain(&all.extra) {
         for (t, m) in &r.discharged {
             writeln!(
                 csv,
@@ -470,8 +542,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     }
     std::fs::write(args.out.join("silo.csv"), csv)?;
     writeln!(md, "\nAll discharge curves: `silo.csv`.")?;
-    part.md = md;
-    Ok(part)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -50,9 +50,20 @@ struct Probe {
 pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let mut part = Part::default();
     let mut md = String::from("## Stability maps\n\n");
+    dem_section(args, &mut part, &mut md)?;
+    mpm_section(args, &mut part, &mut md)?;
+    if !args.quick || !args.sweep_k.is_empty() {
+        hybrid_maps(args, &mut part, &mut md)?;
+    }
+    part.md = md;
+    Ok(part)
+}
+
+/// The DEM step map, its two checks and its chart.
+fn dem_section(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
     let dem = dem_map(args)?;
     map_section(
-        &mut md,
+        md,
         "DEM time step",
         "dt / critical step",
         "the column's settled packing, a = 0.5, 20 ms, in process. Unstable: a non-finite grain or the total energy \
@@ -103,9 +114,14 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             ENERGY_GAIN,
         ),
     )?;
+    Ok(())
+}
+
+/// The MPM CFL map, its check and its chart.
+fn mpm_section(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
     let mpm = mpm_map(args)?;
     map_section(
-        &mut md,
+        md,
         "MPM CFL number",
         "dt / (h/c)",
         "`column_collapse_mpm_2d.toml`, a = 1, 50 ms, in process. Unstable: the step fails (non-finite value, a point off \
@@ -145,11 +161,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             1.0,
         ),
     )?;
-    if !args.quick || !args.sweep_k.is_empty() {
-        hybrid_maps(args, &mut part, &mut md)?;
-    }
-    part.md = md;
-    Ok(part)
+    Ok(())
 }
 
 fn map_section(md: &mut String, title: &str, knob: &str, how: &str, measure: &str, probes: &[Probe]) {
@@ -318,6 +330,7 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
 }
 
 /// The process maps of the hybrid: substeps k and the cell / grain ratio.
+/// The substep map of the hybrid column (processes), then its cell map.
 fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
     let ks = if args.sweep_k.is_empty() {
         vec![2, 5, 10, 20, 40, 80, 160]
@@ -387,6 +400,11 @@ fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow:
             1.0,
         ),
     )?;
+    cell_map(args, part, md, &packing)
+}
+
+/// The hybrid column on cells of 1–4 grain diameters.
+fn cell_map(args: &ValidateArgs, part: &mut Part, md: &mut String, packing: &std::path::Path) -> anyhow::Result<()> {
     let ratios = [1.0, 2.0, 3.0, 4.0];
     let d = 0.001;
     let mut cell_rows = Vec::new();
@@ -402,7 +420,7 @@ fn hybrid_maps(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow:
             format!("coupling.hybrid_band={layer}"),
         ];
         tracing::info!("validate: stability, hybrid cell = {r} d");
-        let row = sweep(args, &packing, &[10], &extra)?.remove(0);
+        let row = sweep(args, packing, &[10], &extra)?.remove(0);
         cell_rows.push(Probe {
             knob: r,
             stable: row.stable,
