@@ -1,10 +1,11 @@
 //! Quick cost probe: settle a dense 3D bed and time steps (not the benchmark; see `grains bench dem`).
 use glam::DVec3;
 use grains_dem::contact::{ContactParams, Damping};
-use grains_dem::packing::{Rng, lattice_in_box, radius};
+use grains_dem::packing::lattice_in_box;
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::D3;
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_grid::rng::{Rng, radius};
 use std::time::Instant;
 
 fn main() {

@@ -7,7 +7,8 @@
 //!   anchor spring with the Coulomb cap, cohesion);
 //! - [`neighbors`]: cell lists → Verlet list with a skin, history carried by grain ids;
 //! - [`pipeline`]: the velocity-Verlet step over all of it, parallel and deterministic;
-//! - [`packing`]: seeded polydisperse radii and initial placements;
+//! - [`packing`]: initial placements (seeded jittered lattices; the radii are drawn with
+//!   `grains_grid::rng`);
 //! - [`coupling`]: the DEM side of the grid-vs-grid coupling (Yue 2018 Alg. 4–5).
 //!
 //! No I/O, no transport, no wall clock: the service wraps it.

@@ -164,10 +164,10 @@ fn gas<S: Space>(n: usize, e: f64, mu: f64, seed: u64) -> DemState<S> {
         nrm[k] = -1.0;
         st.walls.push(Wall::plane(S::from_array(lo), S::from_array(nrm), mu));
     }
-    let mut rng = grains_dem::packing::Rng::new(seed);
+    let mut rng = grains_grid::rng::Rng::new(seed);
     let pts = grains_dem::packing::lattice_in_box::<S>([0.0; 3], [side; 3], 2.6 * RADIUS, 1.3 * RADIUS, 0.2 * RADIUS, &mut rng);
     for (k, p) in pts.into_iter().take(n).enumerate() {
-        let r = grains_dem::packing::radius(&mut rng, RADIUS, 0.05 * RADIUS);
+        let r = grains_grid::rng::radius(&mut rng, RADIUS, 0.05 * RADIUS);
         let i = st.grains.push(k as u64, p, r, Grains::<S>::mass_of(r, DENSITY), 0);
         st.grains.v[i] = S::from_array([rng.normal() * 0.05, rng.normal() * 0.05, rng.normal() * 0.05]);
     }

@@ -1,10 +1,11 @@
 //! Scene → DEM state: the only place where the scene file meets the DEM library.
 
 use grains_dem::contact::{ContactParams, Damping};
-use grains_dem::packing::{Rng, lattice_in_box, radius};
+use grains_dem::packing::lattice_in_box;
 use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_grid::rng::{Rng, radius};
 use grains_protocol::scene::{DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
 use grains_service::zones::{Layer, ZoneField};
 

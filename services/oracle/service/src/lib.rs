@@ -195,7 +195,7 @@ pub struct OracleState {
     /// The grid of the zone cells.
     cells: grains_grid::Grid,
     next_ids: (u64, u64),
-    rng: grains_dem::packing::Rng,
+    rng: grains_grid::rng::Rng,
 }
 
 impl OracleState {
@@ -208,7 +208,7 @@ impl OracleState {
             zones: field.dense(),
             cells: *field.cell_grid(),
             next_ids: (0, 0),
-            rng: grains_dem::packing::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
+            rng: grains_grid::rng::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
         })
     }
 
