@@ -150,7 +150,7 @@ pub struct Inputs<'a> {
     pub clearance: &'a dyn Fn([f64; 3]) -> f64,
     pub grains: &'a [Grain],
     pub points: &'a [Point],
-    /// The grains' stress per node ([`crate::homogenize::stress`]).
+    /// The grains' stress per node ([`grains_grid::homogenize::stress`]).
     pub stress: &'a BTreeMap<u64, [[f64; 3]; 3]>,
 }
 

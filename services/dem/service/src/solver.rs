@@ -359,7 +359,7 @@ impl<S: Space> Solver for DemSolver<S> {
     /// 1 − w of the load; the new points need the material's).
     fn epoch_stress(&mut self, out: &mut Vec<NodeStress>) {
         let g = &self.state.grains;
-        let contacts: Vec<grains_oracle::homogenize::Contact> = self
+        let contacts: Vec<grains_grid::homogenize::Contact> = self
             .pipeline
             .contact_forces(&self.state)
             .into_iter()
@@ -369,7 +369,7 @@ impl<S: Space> Solver for DemSolver<S> {
                 // the radii, on i's side.
                 let (xi, arm) = (S::to_array(g.x[i]), S::to_array(d));
                 let share = g.radius[i] / (g.radius[i] + g.radius[j]);
-                grains_oracle::homogenize::Contact {
+                grains_grid::homogenize::Contact {
                     point: std::array::from_fn(|k| xi[k] - share * arm[k]),
                     force: S::to_array(f),
                     arm,
@@ -379,14 +379,14 @@ impl<S: Space> Solver for DemSolver<S> {
         // A grain on a wall: the grain's half of the branch, from the contact to its centre.
         let walls = self.pipeline.wall_contact_forces(&self.state).into_iter().map(|(i, at, f)| {
             let (xi, xc) = (S::to_array(g.x[i]), S::to_array(at));
-            grains_oracle::homogenize::Contact {
+            grains_grid::homogenize::Contact {
                 point: xc,
                 force: S::to_array(f),
                 arm: std::array::from_fn(|k| xi[k] - xc[k]),
             }
         });
         let contacts: Vec<_> = contacts.into_iter().chain(walls).collect();
-        let stress = grains_oracle::homogenize::stress::<S>(&self.grid, self.kernel, &contacts);
+        let stress = grains_grid::homogenize::stress::<S>(&self.grid, self.kernel, &contacts);
         out.extend(stress.into_iter().map(|(node, s)| NodeStress {
             node,
             stress: [s[0][0], s[1][1], s[2][2], s[1][2], s[0][2], s[0][1]],
