@@ -18,8 +18,8 @@
 //! the missing model is created first and the other one deleted at a later epoch.
 
 use crate::{Zone, column_depth, dims, distance_to_level, enrichment, linear, packing_fraction, zone_of_distance};
-use grains_grid::shape::for_each_node;
 use grains_grid::rng::Rng;
+use grains_grid::shape::for_each_node;
 use grains_grid::{Grid, Kernel, Space};
 use std::collections::{BTreeMap, BTreeSet};
 

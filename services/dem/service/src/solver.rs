@@ -9,9 +9,8 @@ use grains_dem::state::{DemState, WallShape};
 use grains_grid::{Grid, Kernel};
 use grains_protocol::scene::Model;
 use grains_protocol::scene::{GrainTransfer, Scene};
-use grains_protocol::wire::{Command, Control, EpochItem, NodeStress, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_protocol::wire::{Command, Control, EpochItem, NodeStress, NodeVelocity, Param, RasterNode, ViewPoint, Zone};
 use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
-use grains_service::zones::Layer;
 use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
@@ -427,8 +426,8 @@ impl<S: Space> Solver for DemSolver<S> {
             }
         }
         for i in 0..g.len() {
-            let scale = match changes.zones.layer_at(S::to_array(g.x[i])) {
-                Layer::Hybrid if !g.frozen[i] => 1.0 - self.weight,
+            let scale = match changes.zones.zone_at(S::to_array(g.x[i])) {
+                Zone::Hybrid if !g.frozen[i] => 1.0 - self.weight,
                 _ => 1.0,
             };
             if scale != g.scale[i] {

@@ -21,7 +21,7 @@ use grains_protocol::wire::{EpochItem, NodeStress, PointScale, SpawnGrain, Spawn
 use grains_protocol::{Role, checksum::checksum_bytes};
 use grains_service::session::Session;
 use grains_service::solver::{ParticipantOptions, SolverReport, StepWindow, join, next_step, publish_summary};
-use grains_service::zones::{Layer, ZoneField};
+use grains_service::zones::ZoneField;
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -130,7 +130,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 
     let mut report = SolverReport {
         n_items: cells.len() as u64,
-        n_nodes: field.count(Layer::Hybrid) as u64,
+        n_nodes: field.count(Zone::Hybrid) as u64,
         ..SolverReport::default()
     };
     let mut compute = field_time;
