@@ -259,32 +259,3 @@ fn critical_time_step_follows_mass_and_stiffness() {
         "damping lowers it"
     );
 }
-
-/// The hybrid hooks (Yue 2018 Alg. 2): over k substeps a free grain pushed by a constant
-/// force F gains exactly the impulse k dt F (velocity Verlet integrates a constant force
-/// exactly); a snapshot puts its position back exactly; the weight w scales its mass by 1 − w,
-/// so the same force accelerates it 1/(1 − w) times more.
-#[test]
-fn substeps_accumulate_the_impulse_and_snapshots_restore_positions() {
-    let mut st = state::<D2>(params(0.5, 0.5), [0.0; 3]);
-    let m = mass::<D2>();
-    let i = st.grains.push(7, DVec2::new(0.1, 0.2), RADIUS, m, 0);
-    st.grains.scale[i] = 1.0 - 0.25;
-    let force = DVec2::new(3e-3, -1e-3);
-    st.grains.external[i] = force;
-    let mut pipe = DemPipeline::<D2>::new(1).unwrap();
-    let snap = DemPipeline::snapshot(&st);
-    let (dt, k) = (1e-4, 10);
-    let dp = pipe.substeps(&mut st, dt, k);
-    let impulse = force * (k as f64 * dt);
-    assert!(
-        (dp[0] - impulse).length() <= 1e-15 * impulse.length().max(1.0),
-        "{:?} vs {impulse:?}",
-        dp[0]
-    );
-    let dv = st.grains.v[0];
-    assert!((dv.x - impulse.x / (0.75 * m)).abs() <= 1e-12 * dv.x.abs(), "scaled mass: {dv:?}");
-    assert_ne!(st.grains.x[0], DVec2::new(0.1, 0.2));
-    pipe.restore(&mut st, &snap);
-    assert_eq!(st.grains.x[0], DVec2::new(0.1, 0.2));
-}
