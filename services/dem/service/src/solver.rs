@@ -14,7 +14,6 @@ use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set
 pub struct DemSolver<S: Space> {
     pub state: DemState<S>,
     pub pipeline: DemPipeline<S>,
-    substeps: u32,
     /// The DEM half of a coupled step (unused when the DEM runs alone).
     coupled: CoupledStep<S>,
     frames: Option<(FrameWriter, u64)>,
@@ -61,7 +60,6 @@ impl<S: Space> DemSolver<S> {
         let mut solver = DemSolver {
             state,
             pipeline,
-            substeps: scene.coupling.substeps,
             coupled: CoupledStep::new(CouplingParams {
                 grid,
                 kernel,
@@ -133,13 +131,23 @@ fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64
     100.0 * bound.max(f64::MIN_POSITIVE)
 }
 
+/// The DEM substeps of a macro-step, as the time owner gives them (the coupler's step begin,
+/// or the scene's `coupling.substeps` when the DEM runs alone): the one source of the DEM step
+/// `window.dt / substeps`.
+fn substeps(window: &StepWindow) -> anyhow::Result<usize> {
+    if window.substeps == 0 {
+        bail!("DEM step {}: the time owner asked for 0 substeps (at least 1)", window.step);
+    }
+    Ok(window.substeps as usize)
+}
+
 impl<S: Space> Solver for DemSolver<S> {
     /// Yue 2018 Alg. 2 (the substeps) and 4 (the raster of the hybrid grains):
     /// [`CoupledStep::advance`], the NaN and runaway checks, [`CoupledStep::rasterize`].
     fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize> {
-        self.coupled
-            .advance(&mut self.state, &mut self.pipeline, window.dt, self.substeps as usize);
-        self.check(window.step, window.dt / self.substeps as f64)?;
+        let substeps = substeps(window)?;
+        self.coupled.advance(&mut self.state, &mut self.pipeline, window.dt, substeps);
+        self.check(window.step, window.dt / substeps as f64)?;
         Ok(self.coupled.rasterize(&self.state, window.dt).len())
     }
 
@@ -164,8 +172,9 @@ impl<S: Space> Solver for DemSolver<S> {
     }
 
     fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
-        let dt = window.dt / self.substeps as f64;
-        self.pipeline.run(&mut self.state, dt, self.substeps as usize);
+        let substeps = substeps(window)?;
+        let dt = window.dt / substeps as f64;
+        self.pipeline.run(&mut self.state, dt, substeps);
         self.check(window.step, dt)?;
         self.after_step(window)
     }
