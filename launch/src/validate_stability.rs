@@ -91,6 +91,7 @@ pub fn validate_contact(args: &ValidateArgs) -> anyhow::Result<Part> {
             friction: dem.friction,
             cohesion_normal: 0.0,
             cohesion_tangential: 0.0,
+            damping_scale: 1.0,
         };
         let got = impact(p, dem.radius, mat.density);
         let err = got / e - 1.0;

@@ -20,6 +20,7 @@ fn main() {
         friction: 0.5,
         cohesion_normal: 0.0,
         cohesion_tangential: 0.0,
+        damping_scale: 1.0,
     };
     let height = n as f64 / (side / (1.05 * d)).powi(2) * 1.05 * d + 2.0 * d;
     let mut st = DemState::<D3> {

@@ -31,6 +31,7 @@ fn bed() -> DemState<D2> {
         friction: 0.5,
         cohesion_normal: 0.0,
         cohesion_tangential: 0.0,
+        damping_scale: 1.0,
     };
     let mut st = DemState {
         grains: Grains::default(),

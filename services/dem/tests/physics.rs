@@ -18,6 +18,7 @@ fn params(e: f64, mu: f64) -> ContactParams {
         friction: mu,
         cohesion_normal: 0.0,
         cohesion_tangential: 0.0,
+        damping_scale: 1.0,
     }
 }
 

@@ -26,6 +26,7 @@ fn contact_params(m: &DemMaterial) -> ContactParams {
         friction: m.friction,
         cohesion_normal: m.cohesion_normal,
         cohesion_tangential: m.cohesion_tangential,
+        damping_scale: grains_service::fault::restitution_damping_scale(),
     }
 }
 
