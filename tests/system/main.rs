@@ -170,7 +170,10 @@ fn killing_the_launcher_stops_its_participants_within_2_s_and_the_next_run_clean
             unsafe { libc::kill(*p, libc::SIGKILL) };
         }
         assert!(alive.is_empty(), "{scene}: still running 10 s after the launcher died: {alive:?}");
-        assert!(took < Duration::from_secs(2), "{scene}: the participants took {took:?} to exit after the launcher died");
+        assert!(
+            took < Duration::from_secs(2),
+            "{scene}: the participants took {took:?} to exit after the launcher died"
+        );
 
         // The dead launcher's node and services stay behind; the next run removes them.
         assert!(

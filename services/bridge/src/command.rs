@@ -119,7 +119,10 @@ mod tests {
             (br#"{"command":"set","key":"dt","value":1}"#, "\"dt\" is not settable"),
             (br#"{"command":"set","key":"gravity.y","value":"x"}"#, "must be a number"),
             (br#"{"command":"set","key":"gravity.y","value":1e9}"#, "outside [-100, 100]"),
-            (br#"{"command":"set","key":"gravity.y","value":1e308}"#, "set gravity.y: 1e308 is outside"),
+            (
+                br#"{"command":"set","key":"gravity.y","value":1e308}"#,
+                "set gravity.y: 1e308 is outside",
+            ),
             (br#"{"command":"set","key":"wall.2.velocity.x","value":1}"#, "not settable"),
             (
                 br#"{"command":"set","key":"wall.0.velocity.x","value":11}"#,

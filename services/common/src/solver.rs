@@ -433,10 +433,13 @@ pub fn next_step<T: Transport>(
 ) -> anyhow::Result<Option<StepWindow>> {
     let (h, b) = session.recv(step_sub, "the next step", |h, b| -> anyhow::Result<(StepHeader, StepBegin)> {
         session.check_message(&names::STEP_BEGIN, h, h.step, b)?;
-        let begin = b
-            .first()
-            .copied()
-            .ok_or_else(|| anyhow::anyhow!("{}: step {}: an empty message (one StepBegin expected)", names::STEP_BEGIN.name, h.step))?;
+        let begin = b.first().copied().ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: step {}: an empty message (one StepBegin expected)",
+                names::STEP_BEGIN.name,
+                h.step
+            )
+        })?;
         Ok((*h, begin))
     })??;
     Ok((b.flags & STEP_STOP == 0).then_some(StepWindow {
