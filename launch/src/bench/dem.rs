@@ -131,6 +131,7 @@ fn params(dim: usize) -> ContactParams {
             friction: 0.5,
             cohesion_normal: 0.0,
             cohesion_tangential: 0.0,
+            damping_scale: 1.0,
         }
     } else {
         ContactParams {
@@ -140,6 +141,7 @@ fn params(dim: usize) -> ContactParams {
             friction: 0.5,
             cohesion_normal: 0.0,
             cohesion_tangential: 0.0,
+            damping_scale: 1.0,
         }
     }
 }

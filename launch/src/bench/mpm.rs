@@ -188,20 +188,6 @@ fn peer_dt(h: f64) -> f64 {
     CFL * h / ((lambda + 2.0 * mu) / DENSITY).sqrt()
 }
 
-/// SplitMix64: a reproducible stream of uniform numbers in [0, 1).
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// The peer's block: a lattice of PPC_1D points per cell and axis, jittered by ±¼ of the
 /// spacing, resting on the floor (axis 1) at the wall layer and centred on the other axes.
 /// Points are in lattice order with axis 0 fastest, which is grains' node order (the peer's
@@ -221,7 +207,8 @@ fn block<S: MpmSpace>(case: &Case) -> Points<S> {
         }
         count[k] = cells[k] * PPC_1D;
     }
-    let mut rng = Rng(0x6772_6169_6e73);
+    // The seed as it always was: the shared generator mixes its seed with this constant.
+    let mut rng = grains_grid::rng::Rng::new(0x6772_6169_6e73 ^ 0x5851_f42d_4c95_7f2d);
     let mut pts = Points::<S>::default();
     for c in 0..count[2] {
         for b in 0..count[1] {

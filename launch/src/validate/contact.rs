@@ -67,6 +67,8 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             stiffness_normal: dem.stiffness_normal,
             stiffness_tangential: dem.stiffness_tangential,
             damping: Damping::Restitution(e),
+            // GRAINS_FAULT: the fault-injection test breaks this check on purpose.
+            damping_scale: grains_service::fault::restitution_damping_scale(),
             friction: dem.friction,
             cohesion_normal: 0.0,
             cohesion_tangential: 0.0,

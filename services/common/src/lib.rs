@@ -8,9 +8,12 @@
 //! - [`grid`]: the scene's background grid and kernel, shared by the MPM and the DEM's rasters;
 //! - [`zones`]: the layered zones of hybrid bodies (which grains and points exist, their weights);
 //! - [`vtu`]: VTU frames of point clouds (grains, material points) for ParaView;
-//! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares.
+//! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares;
+//! - [`fault`]: fault injection from the environment (`GRAINS_FAULT`), read once, for the
+//!   libraries to take as parameters.
 
 pub mod cli;
+pub mod fault;
 pub mod grid;
 pub mod session;
 pub mod signals;

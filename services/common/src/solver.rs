@@ -21,7 +21,8 @@ pub struct StepWindow {
     /// Simulated time at the start of the step [s].
     pub time: f64,
     pub dt: f64,
-    /// DEM substeps per macro-step.
+    /// DEM substeps per macro-step: the time owner's (the coupler's `StepBegin`, or the
+    /// scene's `coupling.substeps` for a DEM that runs alone), the DEM's one source of them.
     pub substeps: u32,
 }
 

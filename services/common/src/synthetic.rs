@@ -9,6 +9,7 @@
 
 use crate::solver::{Solver, SolverReport, StepWindow};
 use anyhow::{bail, ensure};
+use grains_grid::rng::splitmix64;
 use grains_protocol::Role;
 use grains_protocol::scene::{Synthetic, SyntheticContent};
 use grains_protocol::wire::{NodeVelocity, RasterNode};
@@ -21,13 +22,6 @@ pub struct SyntheticSolver {
     params: Synthetic,
     n: usize,
     report: SolverReport,
-}
-
-fn splitmix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    x ^ (x >> 31)
 }
 
 fn unit(x: u64) -> f64 {
@@ -48,7 +42,7 @@ fn layout(params: &Synthetic, role: Role) -> (u64, u64) {
 /// Raster length of `role` at `step`: the base count shrunk by up to `vary`.
 pub fn raster_len(params: &Synthetic, seed: u64, role: Role, step: u64) -> usize {
     let (_, base) = layout(params, role);
-    let shrink = (params.vary * base as f64 * unit(splitmix(seed ^ splitmix(step ^ ((role as u64) << 56))))) as u64;
+    let shrink = (params.vary * base as f64 * unit(splitmix64(seed ^ splitmix64(step ^ ((role as u64) << 56))))) as u64;
     (base - shrink).max(1) as usize
 }
 
@@ -62,12 +56,12 @@ pub fn node_values(content: SyntheticContent, seed: u64, role: Role, step: u64, 
         p[1] = step as f64 - mass;
         return (mass, p);
     }
-    let h = splitmix(seed ^ splitmix(node ^ splitmix(step ^ ((role as u64) << 56))));
+    let h = splitmix64(seed ^ splitmix64(node ^ splitmix64(step ^ ((role as u64) << 56))));
     let mass = 1.0 + unit(h);
     let mut p = [0.0; 3];
     let mut x = h;
     for c in p.iter_mut().take(dim) {
-        x = splitmix(x);
+        x = splitmix64(x);
         *c = mass * (2.0 * unit(x) - 1.0);
     }
     (mass, p)

@@ -12,13 +12,6 @@ use grains_grid::Grid;
 use grains_protocol::scene::{Body, Model, Scene, Shape, WallShape};
 use grains_protocol::wire::{Zone, ZoneCell};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Layer {
-    Discrete,
-    Hybrid,
-    Continuum,
-}
-
 /// Whether the face of a box body on `axis` (the low face when `low`) at coordinate `at` rests
 /// on a plane or box wall, on a segment lying in it (a silo bottom, orifice included), or on
 /// the domain's own wall layers (within one cell).
@@ -60,9 +53,9 @@ pub fn depth(scene: &Scene, body: &Body, x: [f64; 3]) -> f64 {
     }
 }
 
-/// The zone of material at `x` in a hybrid `body`.
-pub fn layer(scene: &Scene, body: &Body, x: [f64; 3]) -> Layer {
-    layer_of_depth(scene, depth(scene, body, x))
+/// The layered zone of material at `x` in a hybrid `body`.
+pub fn layered_zone(scene: &Scene, body: &Body, x: [f64; 3]) -> Zone {
+    zone_of_depth(scene, depth(scene, body, x))
 }
 
 /// Depths [m] where the hybrid band begins and ends: `coupling.discrete_layer` and
@@ -78,14 +71,14 @@ pub fn band(scene: &Scene) -> (f64, f64) {
     (centre - half, centre + half)
 }
 
-fn layer_of_depth(scene: &Scene, d: f64) -> Layer {
+fn zone_of_depth(scene: &Scene, d: f64) -> Zone {
     let (begin, end) = band(scene);
     if d < begin {
-        Layer::Discrete
+        Zone::Discrete
     } else if d < end {
-        Layer::Hybrid
+        Zone::Hybrid
     } else {
-        Layer::Continuum
+        Zone::Continuum
     }
 }
 
@@ -101,8 +94,8 @@ pub struct ZoneField {
 
 impl ZoneField {
     /// The layered zones of the scene's hybrid bodies (what the oracle publishes at start):
-    /// every cell that overlaps a hybrid body's bounding box, with the layer at its centre.
-    /// Where bodies overlap, the most discrete layer wins.
+    /// every cell that overlaps a hybrid body's bounding box, with the zone at its centre.
+    /// Where bodies overlap, the most discrete zone wins.
     pub fn layered(scene: &Scene) -> Self {
         let (grid, _) = crate::grid::scene_grid(scene);
         let cells = cell_grid(&grid, scene.dim());
@@ -133,7 +126,7 @@ impl ZoneField {
             .into_iter()
             .map(|(cell, distance)| ZoneCell {
                 cell,
-                zone: zone_code(layer_of_depth(scene, distance + interface)) as u32,
+                zone: zone_of_depth(scene, distance + interface) as u32,
                 _pad: 0,
                 distance,
             })
@@ -172,16 +165,16 @@ impl ZoneField {
         &self.zones
     }
 
-    /// The layer of material at `x`: the zone of its cell; discrete outside the listed cells.
-    pub fn layer_at(&self, x: [f64; 3]) -> Layer {
+    /// The zone of material at `x`: the zone of its cell; discrete outside the listed cells.
+    pub fn zone_at(&self, x: [f64; 3]) -> Zone {
         let ijk = [0, 1, 2].map(|k| ((x[k] - self.cells.origin[k]) / self.cells.h).floor() as i64);
         let ijk = [0, 1, 2].map(|k| if self.cells.nodes[k] == 1 { 0 } else { ijk[k] });
         let Some(cell) = self.cells.index(ijk) else {
-            return Layer::Discrete;
+            return Zone::Discrete;
         };
         match self.zones.binary_search_by_key(&cell, |z| z.cell) {
-            Ok(i) => zone_of_code(self.zones[i].zone).unwrap_or(Layer::Discrete),
-            Err(_) => Layer::Discrete,
+            Ok(i) => zone_of_code(self.zones[i].zone).unwrap_or(Zone::Discrete),
+            Err(_) => Zone::Discrete,
         }
     }
 
@@ -194,18 +187,14 @@ impl ZoneField {
     pub fn dense(&self) -> Vec<Zone> {
         let mut out = vec![Zone::Discrete; self.cells.nodes.iter().product::<u64>() as usize];
         for z in &self.zones {
-            out[z.cell as usize] = match zone_of_code(z.zone) {
-                Some(Layer::Continuum) => Zone::Continuum,
-                Some(Layer::Hybrid) => Zone::Hybrid,
-                _ => Zone::Discrete,
-            };
+            out[z.cell as usize] = zone_of_code(z.zone).unwrap_or(Zone::Discrete);
         }
         out
     }
 
-    /// Number of listed cells in `layer`.
-    pub fn count(&self, layer: Layer) -> usize {
-        self.zones.iter().filter(|z| zone_of_code(z.zone) == Some(layer)).count()
+    /// Number of listed cells in `zone`.
+    pub fn count(&self, zone: Zone) -> usize {
+        self.zones.iter().filter(|z| zone_of_code(z.zone) == Some(zone)).count()
     }
 }
 
@@ -233,21 +222,11 @@ fn bounds(scene: &Scene, body: &Body) -> ([f64; 3], [f64; 3]) {
     }
 }
 
-fn zone_code(layer: Layer) -> Zone {
-    match layer {
-        Layer::Continuum => Zone::Continuum,
-        Layer::Hybrid => Zone::Hybrid,
-        Layer::Discrete => Zone::Discrete,
-    }
-}
-
-fn zone_of_code(code: u32) -> Option<Layer> {
-    match code {
-        c if c == Zone::Continuum as u32 => Some(Layer::Continuum),
-        c if c == Zone::Hybrid as u32 => Some(Layer::Hybrid),
-        c if c == Zone::Discrete as u32 => Some(Layer::Discrete),
-        _ => None,
-    }
+/// The zone of a wire code (`ZoneCell::zone`).
+fn zone_of_code(code: u32) -> Option<Zone> {
+    [Zone::Continuum, Zone::Hybrid, Zone::Discrete]
+        .into_iter()
+        .find(|&z| z as u32 == code)
 }
 
 #[cfg(test)]
@@ -323,16 +302,16 @@ hybrid_band = 0.003
         assert!((depth(&s, column, [0.001, 0.002, 0.0]) - 0.039).abs() < 1e-12);
         // 1 mm under the top.
         assert!((depth(&s, column, [0.01, 0.0805, 0.0]) - 0.001).abs() < 1e-12);
-        assert_eq!(layer(&s, column, [0.01, 0.0805, 0.0]), Layer::Discrete);
+        assert_eq!(layered_zone(&s, column, [0.01, 0.0805, 0.0]), Zone::Discrete);
         // 5 mm from the right face: in the band (4 to 7 mm); 8 mm: continuum.
-        assert_eq!(layer(&s, column, [0.035, 0.04, 0.0]), Layer::Hybrid);
-        assert_eq!(layer(&s, column, [0.032, 0.04, 0.0]), Layer::Continuum);
+        assert_eq!(layered_zone(&s, column, [0.035, 0.04, 0.0]), Zone::Hybrid);
+        assert_eq!(layered_zone(&s, column, [0.032, 0.04, 0.0]), Zone::Continuum);
         // A disk: depth from its circle.
         let disk = &s.bodies[1];
         assert!((depth(&s, disk, [0.07, 0.05, 0.0]) - 0.01).abs() < 1e-12);
-        assert_eq!(layer(&s, disk, [0.078, 0.05, 0.0]), Layer::Discrete);
-        assert_eq!(layer(&s, disk, [0.075, 0.05, 0.0]), Layer::Hybrid);
-        assert_eq!(layer(&s, disk, [0.071, 0.05, 0.0]), Layer::Continuum);
+        assert_eq!(layered_zone(&s, disk, [0.078, 0.05, 0.0]), Zone::Discrete);
+        assert_eq!(layered_zone(&s, disk, [0.075, 0.05, 0.0]), Zone::Hybrid);
+        assert_eq!(layered_zone(&s, disk, [0.071, 0.05, 0.0]), Zone::Continuum);
     }
 
     /// The oracle's field gives every cell of a hybrid body the layer at its centre, and
@@ -343,12 +322,12 @@ hybrid_band = 0.003
         let f = ZoneField::layered(&s);
         // Cell 2 mm wide from -6 mm: the cell [30, 32] x [40, 42] mm of the column has its centre
         // 9 mm from the right face (continuum); [34, 36] 5 mm (hybrid); [38, 40] 1 mm (discrete).
-        assert_eq!(f.layer_at([0.0301, 0.041, 0.0]), Layer::Continuum);
-        assert_eq!(f.layer_at([0.0319, 0.041, 0.0]), Layer::Continuum);
-        assert_eq!(f.layer_at([0.0341, 0.041, 0.0]), Layer::Hybrid);
-        assert_eq!(f.layer_at([0.0399, 0.041, 0.0]), Layer::Discrete);
+        assert_eq!(f.zone_at([0.0301, 0.041, 0.0]), Zone::Continuum);
+        assert_eq!(f.zone_at([0.0319, 0.041, 0.0]), Zone::Continuum);
+        assert_eq!(f.zone_at([0.0341, 0.041, 0.0]), Zone::Hybrid);
+        assert_eq!(f.zone_at([0.0399, 0.041, 0.0]), Zone::Discrete);
         // Outside every hybrid body: discrete.
-        assert_eq!(f.layer_at([0.09, 0.09, 0.0]), Layer::Discrete);
+        assert_eq!(f.zone_at([0.09, 0.09, 0.0]), Zone::Discrete);
         // The signed distance is negative on the discrete side (interface at 5.5 mm depth).
         let cell = |x: [f64; 3]| {
             f.cells()
@@ -365,7 +344,7 @@ hybrid_band = 0.003
         assert!((cell([0.0391, 0.041, 0.0]).distance - (0.001 - 0.0055)).abs() < 1e-12);
         assert!((cell([0.0301, 0.041, 0.0]).distance - (0.009 - 0.0055)).abs() < 1e-12);
         // Every layer is present and the round trip keeps the field.
-        assert!(f.count(Layer::Discrete) > 0 && f.count(Layer::Hybrid) > 0 && f.count(Layer::Continuum) > 0);
+        assert!(f.count(Zone::Discrete) > 0 && f.count(Zone::Hybrid) > 0 && f.count(Zone::Continuum) > 0);
         assert_eq!(ZoneField::from_cells(&s, f.cells()).unwrap(), f);
         let mut bad = f.cells().to_vec();
         bad.swap(0, 1);

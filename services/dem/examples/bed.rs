@@ -1,10 +1,11 @@
 //! Quick cost probe: settle a dense 3D bed and time steps (not the benchmark; see `grains bench dem`).
 use glam::DVec3;
 use grains_dem::contact::{ContactParams, Damping};
-use grains_dem::packing::{Rng, lattice_in_box, radius};
+use grains_dem::packing::lattice_in_box;
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::D3;
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_grid::rng::{Rng, radius};
 use std::time::Instant;
 
 fn main() {
@@ -19,6 +20,7 @@ fn main() {
         friction: 0.5,
         cohesion_normal: 0.0,
         cohesion_tangential: 0.0,
+        damping_scale: 1.0,
     };
     let height = n as f64 / (side / (1.05 * d)).powi(2) * 1.05 * d + 2.0 * d;
     let mut st = DemState::<D3> {

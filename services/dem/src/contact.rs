@@ -36,6 +36,11 @@ pub struct ContactParams {
     pub cohesion_normal: f64,
     /// Tangential cohesion e_t [N] (added to the Coulomb cap).
     pub cohesion_tangential: f64,
+    /// Multiplies the damping derived from a restitution e > 0: 1, except to inject a fault
+    /// (a deliberately broken contact law, for the test that shows `grains validate --quick`
+    /// failing; the services read it once from the environment,
+    /// `grains_service::fault::restitution_damping_scale`).
+    pub damping_scale: f64,
 }
 
 /// Normal (and tangential) damping of a contact.
@@ -58,10 +63,13 @@ impl ContactParams {
         }
     }
 
-    /// The mass-independent part of γ, computed once per material: γ/√m for restitution.
+    /// The mass-independent part of γ, computed once per material: γ/√m for restitution
+    /// (times [`ContactParams::damping_scale`] for e > 0).
     pub fn damping_factor(&self) -> f64 {
         match self.damping {
-            Damping::Restitution(e) => damping_factor(e, self.stiffness_normal),
+            // e = 0 (critical damping) is not scaled: the fault doubles the damping of e > 0.
+            Damping::Restitution(e) if e == 0.0 => damping_factor(e, self.stiffness_normal),
+            Damping::Restitution(e) => damping_factor(e, self.stiffness_normal) * self.damping_scale,
             Damping::Viscous(_) => 0.0,
         }
     }
@@ -90,18 +98,7 @@ pub fn damping_factor(restitution: f64, stiffness: f64) -> f64 {
         return 2.0 * stiffness.sqrt();
     }
     let ln_e = restitution.ln();
-    -2.0 * ln_e * (stiffness / (std::f64::consts::PI.powi(2) + ln_e * ln_e)).sqrt() * fault_scale()
-}
-
-/// A deliberately broken build, at run time: `GRAINS_FAULT=restitution-damping-x2` doubles
-/// the damping derived from a restitution coefficient. Only for the test that shows
-/// `grains validate --quick` failing on a broken contact law; 1 otherwise.
-fn fault_scale() -> f64 {
-    static SCALE: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
-    *SCALE.get_or_init(|| match std::env::var("GRAINS_FAULT").as_deref() {
-        Ok("restitution-damping-x2") => 2.0,
-        _ => 1.0,
-    })
+    -2.0 * ln_e * (stiffness / (std::f64::consts::PI.powi(2) + ln_e * ln_e)).sqrt()
 }
 
 /// Reduced mass of a pair [kg]; a wall (infinite mass) is `f64::INFINITY`.
@@ -191,6 +188,7 @@ mod tests {
             friction: mu,
             cohesion_normal: 0.0,
             cohesion_tangential: 0.0,
+            damping_scale: 1.0,
         }
     }
 
@@ -235,6 +233,20 @@ mod tests {
         // Never bonded: no tension at all.
         let f = contact_force::<D2>(&p, -5e-6, DVec2::Y, DVec2::ZERO, 0.0, 1.0, 1e-6, &mut ContactState::default());
         assert!(!f.active);
+    }
+
+    /// The fault-injection knob scales the damping of a restitution e > 0 and nothing else.
+    #[test]
+    fn damping_scale_multiplies_the_restitution_damping() {
+        let mut p = params(0.5);
+        let base = p.damping_factor();
+        p.damping_scale = 2.0;
+        assert_eq!(p.damping_factor(), 2.0 * base);
+        assert_eq!(base, damping_factor(0.5, p.stiffness_normal));
+        p.damping = Damping::Restitution(0.0);
+        assert_eq!(p.damping_factor(), damping_factor(0.0, p.stiffness_normal));
+        p.damping = Damping::Viscous(3.0);
+        assert_eq!(p.gamma(p.damping_factor(), 1.0), 3.0);
     }
 
     #[test]

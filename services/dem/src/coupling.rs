@@ -11,7 +11,8 @@
 //!   (measured: 50 rad/s in a resting layer after 0.8 s). So where the material is
 //!   quasi-static a band grain turns with it; where it flows the solver lets it roll.
 //!
-//! Advection from the saved positions (Alg. 6) is `x = x_saved + dt v` in the solver.
+//! The stage that runs them through a macro-step, with the advection from the saved positions
+//! (Alg. 6), is [`crate::coupled`].
 
 use grains_grid::shape::for_each_node;
 use grains_grid::{Grid, Kernel, Space};

@@ -7,12 +7,16 @@
 //!   anchor spring with the Coulomb cap, cohesion);
 //! - [`neighbors`]: cell lists → Verlet list with a skin, history carried by grain ids;
 //! - [`pipeline`]: the velocity-Verlet step over all of it, parallel and deterministic;
-//! - [`packing`]: seeded polydisperse radii and initial placements;
-//! - [`coupling`]: the DEM side of the grid-vs-grid coupling (Yue 2018 Alg. 4–5).
+//! - [`packing`]: initial placements (seeded jittered lattices; the radii are drawn with
+//!   `grains_grid::rng`);
+//! - [`coupling`]: the kernels of the DEM side of the grid-vs-grid coupling (Yue 2018 Alg. 4–5);
+//! - [`coupled`]: the DEM half of a coupled macro-step over them (Alg. 2, 4–6), split at the
+//!   coupling point: [`coupled::CoupledStep`].
 //!
 //! No I/O, no transport, no wall clock: the service wraps it.
 
 pub mod contact;
+pub mod coupled;
 pub mod coupling;
 pub mod neighbors;
 pub mod packing;
@@ -23,6 +27,7 @@ pub mod state;
 pub use grains_grid::space;
 
 pub use contact::ContactParams;
+pub use coupled::{CoupledStep, CouplingParams, GrainTransfer};
 pub use pipeline::DemPipeline;
 pub use space::{D2, D3, Space};
 pub use state::{DemParams, DemState, Domain, Grains, Wall, WallShape};

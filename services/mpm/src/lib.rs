@@ -19,18 +19,3 @@ pub mod matrix;
 pub mod pipeline;
 pub mod points;
 pub mod sparse;
-
-/// xorshift64 for the unit tests: reproducible "random-ish" numbers in [−1, 1) without a
-/// dependency.
-#[cfg(test)]
-mod test_rng {
-    pub struct Rng(pub u64);
-    impl Rng {
-        pub fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-    }
-}

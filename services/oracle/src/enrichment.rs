@@ -1,6 +1,6 @@
 //! Enrichment (continuum → hybrid, Yue 2018 §4.2): where new grains go and how they move.
 
-use grains_dem::packing::{Rng, radius};
+use grains_grid::rng::{Rng, radius};
 use std::collections::HashMap;
 
 /// New grains (centre, radius) filling the part of the box [`min`, `max`] where `inside(x)`,

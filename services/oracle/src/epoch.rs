@@ -18,7 +18,7 @@
 //! the missing model is created first and the other one deleted at a later epoch.
 
 use crate::{Zone, column_depth, dims, distance_to_level, enrichment, linear, packing_fraction, zone_of_distance};
-use grains_dem::packing::Rng;
+use grains_grid::rng::Rng;
 use grains_grid::shape::for_each_node;
 use grains_grid::{Grid, Kernel, Space};
 use std::collections::{BTreeMap, BTreeSet};
@@ -150,7 +150,7 @@ pub struct Inputs<'a> {
     pub clearance: &'a dyn Fn([f64; 3]) -> f64,
     pub grains: &'a [Grain],
     pub points: &'a [Point],
-    /// The grains' stress per node ([`crate::homogenize::stress`]).
+    /// The grains' stress per node ([`grains_grid::homogenize::stress`]).
     pub stress: &'a BTreeMap<u64, [[f64; 3]; 3]>,
 }
 

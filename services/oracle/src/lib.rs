@@ -8,7 +8,6 @@
 //! - [`zone_of_distance`]: continuum, hybrid or discrete from that distance, `φ0` and `r_h`;
 //! - [`enrichment`]: where new grains go (Poisson-disk growth from the grains there) and their
 //!   velocity (Alg. 10);
-//! - [`homogenize`]: the grains' stress on the MPM grid (Alg. 11);
 //! - [`epoch`]: one epoch of the oracle: new zones, and the grains and points to delete and
 //!   create (Alg. 8, 17, 18).
 
@@ -16,7 +15,6 @@ use grains_grid::Grid;
 
 pub mod enrichment;
 pub mod epoch;
-pub mod homogenize;
 
 /// Where a cell lies relative to the reconciliation zone (the protocol's codes).
 pub use grains_protocol::wire::Zone;

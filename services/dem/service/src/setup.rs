@@ -1,12 +1,14 @@
 //! Scene → DEM state: the only place where the scene file meets the DEM library.
 
 use grains_dem::contact::{ContactParams, Damping};
-use grains_dem::packing::{Rng, lattice_in_box, radius};
+use grains_dem::packing::lattice_in_box;
 use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_grid::rng::{Rng, radius};
 use grains_protocol::scene::{DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
-use grains_service::zones::{Layer, ZoneField};
+use grains_protocol::wire::Zone;
+use grains_service::zones::ZoneField;
 
 /// DEM step length of a scene: the macro-step over the substeps.
 pub fn dem_dt(scene: &Scene) -> f64 {
@@ -24,6 +26,7 @@ fn contact_params(m: &DemMaterial) -> ContactParams {
         friction: m.friction,
         cohesion_normal: m.cohesion_normal,
         cohesion_tangential: m.cohesion_tangential,
+        damping_scale: grains_service::fault::restitution_damping_scale(),
     }
 }
 
@@ -105,10 +108,10 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
     // Hybrid bodies: grains in the discrete and hybrid cells only, the hybrid ones with mass and
     // springs scaled by 1 − w; `None` for a grain in a continuum cell.
     let zone_scale = |body: &grains_protocol::scene::Body, x: S::V| match body.model {
-        Model::Hybrid => match zones.layer_at(S::to_array(x)) {
-            Layer::Continuum => None,
-            Layer::Hybrid => Some(1.0 - scene.coupling.weight),
-            Layer::Discrete => Some(1.0),
+        Model::Hybrid => match zones.zone_at(S::to_array(x)) {
+            Zone::Continuum => None,
+            Zone::Hybrid => Some(1.0 - scene.coupling.weight),
+            Zone::Discrete => Some(1.0),
         },
         Model::Dem | Model::Mpm => Some(1.0),
     };

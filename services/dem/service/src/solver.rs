@@ -2,23 +2,20 @@
 
 use crate::frames::FrameWriter;
 use anyhow::bail;
-use grains_dem::coupling;
+use grains_dem::coupled::{CoupledStep, CouplingParams};
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemState, WallShape};
-use grains_grid::{Grid, Kernel};
 use grains_protocol::scene::Model;
 use grains_protocol::scene::{GrainTransfer, Scene};
-use grains_protocol::wire::{Command, Control, EpochItem, NodeStress, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_protocol::wire::{Command, Control, EpochItem, NodeStress, NodeVelocity, Param, RasterNode, ViewPoint, Zone};
 use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
-use grains_service::zones::Layer;
-use std::collections::HashMap;
 
 pub struct DemSolver<S: Space> {
     pub state: DemState<S>,
     pub pipeline: DemPipeline<S>,
-    substeps: u32,
-    grain_transfer: GrainTransfer,
+    /// The DEM half of a coupled step (unused when the DEM runs alone).
+    coupled: CoupledStep<S>,
     frames: Option<(FrameWriter, u64)>,
     /// The run's output directory (for a snapshot when frames are off).
     out_dir: Option<std::path::PathBuf>,
@@ -29,22 +26,7 @@ pub struct DemSolver<S: Space> {
     /// extent it is computed with [m].
     energy_bound: f64,
     extent: f64,
-    /// The MPM's grid and kernel, for the raster of a coupled step.
-    grid: Grid,
-    kernel: Kernel,
-    /// A coupled step in progress: the hybrid grains (scale < 1) by id with their positions at
-    /// the start of the step, and the raster of their predicted momentum.
-    hybrid: HashMap<u64, S::V>,
-    raster: Vec<coupling::NodeMomentum<S>>,
-    /// With `grain_transfer = "flip"`: per node of `raster`, the impulse of the coupling
-    /// forces the grains carried through the substeps (`external`), which the coupler must not
-    /// see: it is taken out of the raster it is sent.
-    carried: Vec<S::V>,
-    /// With `"flip"`: each constrained node's coupling acceleration of the last step [m/s²].
-    accel: HashMap<u64, S::V>,
-    /// With `"flip"`: the inertial number below which a band grain turns with the material,
-    /// and |g| [m/s²].
-    quasi_static: f64,
+    /// |g| of the scene [m/s²], for the runaway bound after new grains.
     gravity: f64,
     /// Grains the oracle creates: their material (index into the state's materials) and
     /// density, the first hybrid body's; and the hybrid weight w.
@@ -78,20 +60,21 @@ impl<S: Space> DemSolver<S> {
         let mut solver = DemSolver {
             state,
             pipeline,
-            substeps: scene.coupling.substeps,
-            grain_transfer: scene.coupling.grain_transfer,
+            coupled: CoupledStep::new(CouplingParams {
+                grid,
+                kernel,
+                transfer: match scene.coupling.grain_transfer {
+                    GrainTransfer::Pic => grains_dem::GrainTransfer::Pic,
+                    GrainTransfer::Flip => grains_dem::GrainTransfer::Flip,
+                },
+                quasi_static: scene.coupling.quasi_static,
+                gravity: S::from_array(scene.gravity).length(),
+            }),
             frames: frames.map(|f| (f, scene.output.frames_every)),
             out_dir: out_dir.map(std::path::Path::to_path_buf),
             walls_log,
             energy_bound,
             extent,
-            grid,
-            kernel,
-            hybrid: HashMap::new(),
-            raster: Vec::new(),
-            carried: Vec::new(),
-            accel: HashMap::new(),
-            quasi_static: scene.coupling.quasi_static,
             gravity: S::from_array(scene.gravity).length(),
             spawn: scene.bodies.iter().find(|b| b.model == Model::Hybrid).map(|b| {
                 let index = scene.materials[..b.material].iter().filter(|m| m.dem.is_some()).count() as u32;
@@ -103,11 +86,6 @@ impl<S: Space> DemSolver<S> {
             f.write(0, &solver.state, &solver.pipeline)?;
         }
         Ok(solver)
-    }
-
-    /// Node `k` of the raster without the impulse of the carried coupling push.
-    fn uncoupled_momentum(&self, k: usize) -> S::V {
-        self.raster[k].momentum - self.carried.get(k).copied().unwrap_or_default()
     }
 
     /// NaN and runaway energy, with the step and the likely cause.
@@ -153,141 +131,50 @@ fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64
     100.0 * bound.max(f64::MIN_POSITIVE)
 }
 
+/// The DEM substeps of a macro-step, as the time owner gives them (the coupler's step begin,
+/// or the scene's `coupling.substeps` when the DEM runs alone): the one source of the DEM step
+/// `window.dt / substeps`.
+fn substeps(window: &StepWindow) -> anyhow::Result<usize> {
+    if window.substeps == 0 {
+        bail!("DEM step {}: the time owner asked for 0 substeps (at least 1)", window.step);
+    }
+    Ok(window.substeps as usize)
+}
+
 impl<S: Space> Solver for DemSolver<S> {
-    /// Yue 2018 Alg. 2: saves the hybrid grains' positions, runs the k substeps (hybrid grains
-    /// with mass and springs scaled by 1 − w), and rasterizes their predicted momentum at the
-    /// saved positions onto the MPM grid with its weights (Alg. 4).
-    ///
-    /// With `grain_transfer = "flip"` the substeps also push every hybrid grain with the last
-    /// step's coupling acceleration of the nodes around it: the coupling force then acts on the
-    /// grains while their contacts do, rather than as a kick after them (kicks a step apart
-    /// shake a resting band until it creeps: 0.23 grain diameters in 0.5 s), and the coupler
-    /// only corrects what changed. The raster it is sent leaves that push out.
+    /// Yue 2018 Alg. 2 (the substeps) and 4 (the raster of the hybrid grains):
+    /// [`CoupledStep::advance`], the NaN and runaway checks, [`CoupledStep::rasterize`].
     fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize> {
-        let g = &self.state.grains;
-        // Frozen grains never move: never hybrid.
-        self.hybrid = (0..g.len())
-            .filter(|&i| g.scale[i] < 1.0 && !g.frozen[i])
-            .map(|i| (g.id[i], g.x[i]))
-            .collect();
-        if self.grain_transfer == GrainTransfer::Flip {
-            // Nodes the coupler did not constrain last step push nothing.
-            let g = &mut self.state.grains;
-            let accel = |n: u64| Some(self.accel.get(&n).copied().unwrap_or_default());
-            for i in 0..g.len() {
-                if self.hybrid.contains_key(&g.id[i]) {
-                    let (a, _) = coupling::interpolate::<S>(&self.grid, self.kernel, g.x[i], accel);
-                    g.external[i] = a * (g.mass[i] * g.scale[i]);
-                }
-            }
-        }
-        let dt = window.dt / self.substeps as f64;
-        self.pipeline.run(&mut self.state, dt, self.substeps as usize);
-        self.check(window.step, dt)?;
-        let g = &self.state.grains;
-        let saved: Vec<S::V> = (0..g.len()).map(|i| self.hybrid.get(&g.id[i]).copied().unwrap_or(g.x[i])).collect();
-        let mass: Vec<f64> = (0..g.len()).map(|i| g.mass[i] * g.scale[i]).collect();
-        let hybrid = &self.hybrid;
-        let include = |i: usize| hybrid.contains_key(&g.id[i]);
-        self.raster = coupling::rasterize::<S>(&self.grid, self.kernel, &saved, &g.v, &mass, include);
-        self.carried.clear();
-        if self.grain_transfer == GrainTransfer::Flip {
-            // The push's impulse per node, Σ w F dt, with the raster's weights and nodes.
-            let impulse: Vec<S::V> = (0..g.len())
-                .map(|i| g.external[i] * (window.dt / mass[i].max(f64::MIN_POSITIVE)))
-                .collect();
-            let r = coupling::rasterize::<S>(&self.grid, self.kernel, &saved, &impulse, &mass, include);
-            self.carried = r.into_iter().map(|n| n.momentum).collect();
-        }
-        Ok(self.raster.len())
+        let substeps = substeps(window)?;
+        self.coupled.advance(&mut self.state, &mut self.pipeline, window.dt, substeps);
+        self.check(window.step, window.dt / substeps as f64)?;
+        Ok(self.coupled.rasterize(&self.state, window.dt).len())
     }
 
-    /// The predicted momentum without the carried coupling forces: what the grains would have
-    /// without any coupling, which is what the coupler's eq. 31 needs.
+    /// The predicted momentum without the carried coupling forces
+    /// ([`CoupledStep::uncoupled_momentum`]).
     fn write_raster(&mut self, _window: &StepWindow, out: &mut [RasterNode]) {
-        for (k, (o, r)) in out.iter_mut().zip(&self.raster).enumerate() {
+        for (k, (o, r)) in out.iter_mut().zip(self.coupled.raster()).enumerate() {
             *o = RasterNode {
                 node: r.node,
                 mass: r.mass,
-                momentum: S::to_array(self.uncoupled_momentum(k)),
+                momentum: S::to_array(self.coupled.uncoupled_momentum(k)),
             };
         }
     }
 
-    /// Alg. 5 and 6. With `grain_transfer = "flip"` every hybrid grain adds to its substepped
-    /// velocity the coupling's change of the node velocities (constrained minus its own
-    /// raster's; on nodes the coupler left alone, its uncoupled minus its own: the push is
-    /// taken back) interpolated at its saved position, moves by that change times dt / 2 and
-    /// takes the spin of the constrained field; each node's whole coupling acceleration
-    /// (constrained velocity minus the uncoupled one, over dt) is kept for the next step's
-    /// substeps. With `"pic"` (Alg. 5–6 as written) it takes the velocity interpolated from the coupler's node velocities (its own raster's elsewhere) and the spin
-    /// of that field, and moves from its saved position with that velocity. The other grains
-    /// keep their substepped state.
+    /// Alg. 5 and 6 with the coupler's velocities ([`CoupledStep::finish`]), then the walls'
+    /// loads and the frames.
     fn finish(&mut self, window: &StepWindow, velocities: &[NodeVelocity]) -> anyhow::Result<()> {
-        if !self.hybrid.is_empty() {
-            let constrained: HashMap<u64, S::V> = velocities.iter().map(|v| (v.node, S::from_array(v.velocity))).collect();
-            let own: HashMap<u64, S::V> = self.raster.iter().map(|r| (r.node, r.momentum * (1.0 / r.mass))).collect();
-            let node_velocity = |n: u64| constrained.get(&n).or_else(|| own.get(&n)).copied();
-            let flip = self.grain_transfer == GrainTransfer::Flip;
-            // Each node's velocity without any coupling force (its own without the push).
-            let free: HashMap<u64, S::V> = self
-                .raster
-                .iter()
-                .enumerate()
-                .map(|(k, r)| (r.node, self.uncoupled_momentum(k) * (1.0 / r.mass)))
-                .collect();
-            if flip {
-                // The whole coupling acceleration of each node: its constrained velocity minus
-                // the velocity it would have had without any coupling force.
-                self.accel = free
-                    .iter()
-                    .filter_map(|(n, f)| constrained.get(n).map(|v| (*n, (*v - *f) * (1.0 / window.dt))))
-                    .collect();
-            }
-            let g = &mut self.state.grains;
-            // The coupling's change of each node velocity. Where the coupler did not act the
-            // node goes back to its uncoupled velocity: the part of the push spread there is
-            // taken back.
-            let change = |n: u64| {
-                let o = own.get(&n).copied().unwrap_or_default();
-                Some(constrained.get(&n).or_else(|| free.get(&n)).map_or(S::V::default(), |c| *c - o))
-            };
-            for i in 0..g.len() {
-                if let Some(&x0) = self.hybrid.get(&g.id[i]) {
-                    if flip {
-                        // The rest of the coupling force, spread evenly over the step, changes
-                        // the velocity by dv and the position by dv dt / 2.
-                        let (dv, _) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, change);
-                        g.v[i] += dv;
-                        g.x[i] += dv * (0.5 * window.dt);
-                        // Its spin is not coupled otherwise: where the material is
-                        // quasi-static the grain turns with it (held up by the coupling, it
-                        // would be spun up by the sliding of its contacts: 35 rad/s in a
-                        // resting layer, which creeps 0.3 d in 0.5 s); where it flows the grain
-                        // rolls (turning with the material there, a = 0.5 columns stop at
-                        // 2/3 of the DEM's runout). I² = γ̇² d / |g| < I_c², without a division.
-                        let (_, grad) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
-                        let rate = grad.shear_rate(S::DIM);
-                        let d = 2.0 * g.radius[i];
-                        if rate * rate * d < self.quasi_static * self.quasi_static * self.gravity {
-                            g.omega[i] = grad.spin::<S>();
-                        }
-                    } else {
-                        let (v, grad) = coupling::interpolate::<S>(&self.grid, self.kernel, x0, node_velocity);
-                        g.v[i] = v;
-                        g.omega[i] = grad.spin::<S>();
-                        g.x[i] = x0 + v * window.dt;
-                    }
-                }
-            }
-            self.pipeline.invalidate();
-        }
+        let constrained = velocities.iter().map(|v| (v.node, S::from_array(v.velocity)));
+        self.coupled.finish(&mut self.state, &mut self.pipeline, constrained, window.dt);
         self.after_step(window)
     }
 
     fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
-        let dt = window.dt / self.substeps as f64;
-        self.pipeline.run(&mut self.state, dt, self.substeps as usize);
+        let substeps = substeps(window)?;
+        let dt = window.dt / substeps as f64;
+        self.pipeline.run(&mut self.state, dt, substeps);
         self.check(window.step, dt)?;
         self.after_step(window)
     }
@@ -359,7 +246,7 @@ impl<S: Space> Solver for DemSolver<S> {
     /// 1 − w of the load; the new points need the material's).
     fn epoch_stress(&mut self, out: &mut Vec<NodeStress>) {
         let g = &self.state.grains;
-        let contacts: Vec<grains_oracle::homogenize::Contact> = self
+        let contacts: Vec<grains_grid::homogenize::Contact> = self
             .pipeline
             .contact_forces(&self.state)
             .into_iter()
@@ -369,7 +256,7 @@ impl<S: Space> Solver for DemSolver<S> {
                 // the radii, on i's side.
                 let (xi, arm) = (S::to_array(g.x[i]), S::to_array(d));
                 let share = g.radius[i] / (g.radius[i] + g.radius[j]);
-                grains_oracle::homogenize::Contact {
+                grains_grid::homogenize::Contact {
                     point: std::array::from_fn(|k| xi[k] - share * arm[k]),
                     force: S::to_array(f),
                     arm,
@@ -379,14 +266,15 @@ impl<S: Space> Solver for DemSolver<S> {
         // A grain on a wall: the grain's half of the branch, from the contact to its centre.
         let walls = self.pipeline.wall_contact_forces(&self.state).into_iter().map(|(i, at, f)| {
             let (xi, xc) = (S::to_array(g.x[i]), S::to_array(at));
-            grains_oracle::homogenize::Contact {
+            grains_grid::homogenize::Contact {
                 point: xc,
                 force: S::to_array(f),
                 arm: std::array::from_fn(|k| xi[k] - xc[k]),
             }
         });
         let contacts: Vec<_> = contacts.into_iter().chain(walls).collect();
-        let stress = grains_oracle::homogenize::stress::<S>(&self.grid, self.kernel, &contacts);
+        let CouplingParams { grid, kernel, .. } = &self.coupled.params;
+        let stress = grains_grid::homogenize::stress::<S>(grid, *kernel, &contacts);
         out.extend(stress.into_iter().map(|(node, s)| NodeStress {
             node,
             stress: [s[0][0], s[1][1], s[2][2], s[1][2], s[0][2], s[0][1]],
@@ -427,8 +315,8 @@ impl<S: Space> Solver for DemSolver<S> {
             }
         }
         for i in 0..g.len() {
-            let scale = match changes.zones.layer_at(S::to_array(g.x[i])) {
-                Layer::Hybrid if !g.frozen[i] => 1.0 - self.weight,
+            let scale = match changes.zones.zone_at(S::to_array(g.x[i])) {
+                Zone::Hybrid if !g.frozen[i] => 1.0 - self.weight,
                 _ => 1.0,
             };
             if scale != g.scale[i] {
@@ -453,7 +341,7 @@ impl<S: Space> Solver for DemSolver<S> {
         let p = S::to_array(DemPipeline::momentum(&self.state));
         SolverReport {
             n_items: g.len() as u64,
-            n_nodes: self.raster.len() as u64,
+            n_nodes: self.coupled.raster().len() as u64,
             mass: g.mass.iter().zip(&g.scale).map(|(m, s)| m * s).sum(),
             momentum: p,
             kinetic_energy: DemPipeline::kinetic_energy(&self.state),

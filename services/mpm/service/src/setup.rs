@@ -9,7 +9,8 @@ use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
 use grains_protocol::scene::{Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
-use grains_service::zones::{Layer, ZoneField};
+use grains_protocol::wire::Zone;
+use grains_service::zones::ZoneField;
 
 /// The one MPM material of a scene (one per scene in this version) and its index.
 fn mpm_material(scene: &Scene) -> Result<(usize, &Material), String> {
@@ -185,10 +186,10 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
         {
             // Hybrid bodies: points in the hybrid band (weight w) and below it only.
             let weight = match body.model {
-                BodyModel::Hybrid => match zones.layer_at(S::to_array(x)) {
-                    Layer::Discrete => continue,
-                    Layer::Hybrid => scene.coupling.weight,
-                    Layer::Continuum => 1.0,
+                BodyModel::Hybrid => match zones.zone_at(S::to_array(x)) {
+                    Zone::Discrete => continue,
+                    Zone::Hybrid => scene.coupling.weight,
+                    Zone::Continuum => 1.0,
                 },
                 BodyModel::Mpm | BodyModel::Dem => 1.0,
             };

@@ -8,10 +8,9 @@ use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline};
 use grains_mpm::points::{Points, totals};
 use grains_protocol::scene::Scene;
-use grains_protocol::wire::{Command, Control, EpochItem, NodeVelocity, Param, RasterNode, ViewPoint};
+use grains_protocol::wire::{Command, Control, EpochItem, NodeVelocity, Param, RasterNode, ViewPoint, Zone};
 use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
 use grains_service::vtu::{Field, PointFrames, Values};
-use grains_service::zones::Layer;
 
 pub struct MpmSolver<S: MpmSpace> {
     pub points: Points<S>,
@@ -307,8 +306,8 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             p.tau[k] = model.kirchhoff(&b_e);
         }
         for k in 0..p.len() {
-            p.weight[k] = match changes.zones.layer_at(S::to_array(p.x[k])) {
-                Layer::Hybrid => self.weight,
+            p.weight[k] = match changes.zones.zone_at(S::to_array(p.x[k])) {
+                Zone::Hybrid => self.weight,
                 _ => 1.0,
             };
         }

@@ -21,7 +21,7 @@ use grains_protocol::wire::{EpochItem, NodeStress, PointScale, SpawnGrain, Spawn
 use grains_protocol::{Role, checksum::checksum_bytes};
 use grains_service::session::Session;
 use grains_service::solver::{ParticipantOptions, SolverReport, StepWindow, join, next_step, publish_summary};
-use grains_service::zones::{Layer, ZoneField};
+use grains_service::zones::ZoneField;
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -130,7 +130,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 
     let mut report = SolverReport {
         n_items: cells.len() as u64,
-        n_nodes: field.count(Layer::Hybrid) as u64,
+        n_nodes: field.count(Zone::Hybrid) as u64,
         ..SolverReport::default()
     };
     let mut compute = field_time;
@@ -195,7 +195,7 @@ pub struct OracleState {
     /// The grid of the zone cells.
     cells: grains_grid::Grid,
     next_ids: (u64, u64),
-    rng: grains_dem::packing::Rng,
+    rng: grains_grid::rng::Rng,
 }
 
 impl OracleState {
@@ -208,7 +208,7 @@ impl OracleState {
             zones: field.dense(),
             cells: *field.cell_grid(),
             next_ids: (0, 0),
-            rng: grains_dem::packing::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
+            rng: grains_grid::rng::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
         })
     }
 

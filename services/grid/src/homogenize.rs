@@ -1,8 +1,10 @@
 //! Homogenization (discrete → hybrid, Yue 2018 §4.2, Alg. 11): the stress of the grains as a
-//! field on the MPM grid, for the new material points.
+//! field on the MPM grid, for the new material points. The DEM computes it from its contacts
+//! and sends it to the oracle, which gives it to the points it creates; it lives here, below
+//! both, because it is the grid's shape functions applied to a contact list.
 
-use grains_grid::shape::for_each_node;
-use grains_grid::{Grid, Kernel, Space};
+use crate::shape::for_each_node;
+use crate::{Grid, Kernel, Space};
 use std::collections::BTreeMap;
 
 /// One contact between two grains.
@@ -43,7 +45,7 @@ pub fn stress<S: Space>(grid: &Grid, kernel: Kernel, contacts: &[Contact]) -> BT
 #[cfg(test)]
 mod tests {
     use super::*;
-    use grains_grid::D2;
+    use crate::D2;
 
     /// A hexagonal lattice of disks (radius r), every contact pushing with F: per grain three
     /// contacts of arm 2r at 0°, 60°, 120° (Σ n⊗n = 3/2 I) over its area 2√3 r², so

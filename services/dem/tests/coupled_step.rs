@@ -1,0 +1,214 @@
+//! The DEM half of a coupled step (Yue 2018 Alg. 2, 4–6, [`grains_dem::coupled`]) against the
+//! DEM step alone and against what the coupler gives it, without a coupler: the constrained
+//! velocities are made up by each test.
+
+use glam::DVec2;
+use grains_dem::contact::{ContactParams, Damping};
+use grains_dem::coupled::{CoupledStep, CouplingParams, GrainTransfer};
+use grains_dem::packing::lattice_in_box;
+use grains_dem::pipeline::DemPipeline;
+use grains_dem::space::{D2, Space};
+use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_grid::rng::{Rng, radius};
+use grains_grid::{Grid, Kernel};
+
+const RADIUS: f64 = 5e-4;
+const DENSITY: f64 = 2530.0;
+/// The box of the grains and the domain [m].
+const SIZE: [f64; 3] = [0.02, 0.03, 0.0];
+/// A macro-step of 100 DEM steps of 5e-7 s (≈ 150 per contact).
+const DT: f64 = 5e-5;
+const SUBSTEPS: usize = 100;
+const CELL: f64 = 0.002;
+
+/// A few hundred disks (Chen 2021 Table 1 contact law) on a jittered lattice in a walled box,
+/// under gravity, with small random velocities: they collide and settle.
+fn bed() -> DemState<D2> {
+    let p = ContactParams {
+        stiffness_normal: 1772093.8,
+        stiffness_tangential: 886046.9,
+        damping: Damping::Viscous(7.0),
+        friction: 0.5,
+        cohesion_normal: 0.0,
+        cohesion_tangential: 0.0,
+        damping_scale: 1.0,
+    };
+    let mut st = DemState {
+        grains: Grains::default(),
+        walls: Vec::new(),
+        params: DemParams {
+            materials: vec![p],
+            gravity: DVec2::new(0.0, -9.81),
+            domain: Domain {
+                min: [0.0; 3],
+                max: SIZE,
+                periodic: [false; 3],
+            },
+            skin: 0.2 * RADIUS,
+        },
+        time: 0.0,
+    };
+    for k in 0..2 {
+        let mut n = [0.0; 3];
+        n[k] = 1.0;
+        st.walls.push(Wall::plane(DVec2::ZERO, D2::from_array(n), 0.5));
+        n[k] = -1.0;
+        st.walls.push(Wall::plane(D2::from_array(SIZE), D2::from_array(n), 0.5));
+    }
+    let mut rng = Rng::new(5);
+    let r_max = RADIUS + 2.0 * 4e-5;
+    let sites = lattice_in_box::<D2>([0.0; 3], [0.02, 0.02, 0.0], 2.04 * r_max, 1.01 * r_max, 0.01 * RADIUS, &mut rng);
+    for (id, x) in sites.into_iter().enumerate() {
+        let r = radius(&mut rng, RADIUS, 4e-5);
+        let i = st.grains.push(id as u64, x, r, Grains::<D2>::mass_of(r, DENSITY), 0);
+        st.grains.v[i] = DVec2::new(0.02 * rng.normal(), 0.02 * rng.normal());
+    }
+    assert!(st.grains.len() > 200, "{} grains", st.grains.len());
+    st
+}
+
+/// The stage on a grid over the box with a margin of two cells: a quadratic B-spline reaches
+/// nodes up to 1.5 cells from a grain, so a grain at a wall has weight beyond it (on the
+/// scene's grid, which ends at the domain, those nodes would be dropped).
+fn stage(transfer: GrainTransfer, kernel: Kernel) -> CoupledStep<D2> {
+    let margin = 2.0 * CELL;
+    CoupledStep::new(CouplingParams {
+        grid: Grid::covering([-margin, -margin, 0.0], [SIZE[0] + margin, SIZE[1] + margin, 0.0], CELL, 2),
+        kernel,
+        transfer,
+        quasi_static: 1e-3,
+        gravity: 9.81,
+    })
+}
+
+/// The scene's default kernel: GIMP with two points per cell and axis.
+const GIMP: Kernel = Kernel::Gimp { half_width: 0.25 * CELL };
+
+/// Σ (1 − w) m v of the grains.
+fn weighted_momentum(g: &Grains<D2>) -> DVec2 {
+    (0..g.len()).fold(DVec2::ZERO, |a, i| a + g.v[i] * (g.mass[i] * g.scale[i]))
+}
+
+/// Without hybrid grains a coupled step is the step alone, bit for bit, with either transfer:
+/// nothing is rasterized and every grain keeps its substepped state.
+#[test]
+fn without_hybrid_grains_the_coupled_step_is_the_step_alone() {
+    for transfer in [GrainTransfer::Flip, GrainTransfer::Pic] {
+        let (mut alone, mut coupled) = (bed(), bed());
+        let (mut pipe_alone, mut pipe_coupled) = (DemPipeline::<D2>::new(1).unwrap(), DemPipeline::<D2>::new(1).unwrap());
+        let mut step = stage(transfer, GIMP);
+        for _ in 0..10 {
+            pipe_alone.run(&mut alone, DT / SUBSTEPS as f64, SUBSTEPS);
+            assert!(step.predict(&mut coupled, &mut pipe_coupled, DT, SUBSTEPS).is_empty());
+            step.finish(&mut coupled, &mut pipe_coupled, [], DT);
+        }
+        assert_eq!(alone.grains, coupled.grains, "{transfer:?}");
+        assert_eq!(alone.time, coupled.time);
+    }
+}
+
+/// With every grain hybrid (scale 1 − w = 0.5) and no MPM to share nodes with, the grains take
+/// the velocities of their own raster (Alg. 5): the weighted momentum of the raster is the
+/// grains' weighted momentum after the substeps, and after the transfer back it is unchanged
+/// (Σ_g m_g Σ_i w_gi v_i = Σ_i m_i v_i: the weights are a partition of unity), to round-off;
+/// with either transfer and kernel.
+#[test]
+fn hybrid_grains_round_trip_through_their_raster_keeping_momentum() {
+    for transfer in [GrainTransfer::Flip, GrainTransfer::Pic] {
+        for kernel in [GIMP, Kernel::Bspline2] {
+            let mut st = bed();
+            st.grains.scale.iter_mut().for_each(|s| *s = 0.5);
+            let mut pipe = DemPipeline::<D2>::new(1).unwrap();
+            let mut step = stage(transfer, kernel);
+            let n = step.predict(&mut st, &mut pipe, DT, SUBSTEPS).len();
+            assert!(n > 0);
+            let raster_m: f64 = step.raster().iter().map(|r| r.mass).sum();
+            let raster_p = (0..n).fold(DVec2::ZERO, |a, k| a + step.uncoupled_momentum(k));
+            let g = &st.grains;
+            let before = weighted_momentum(g);
+            let grains_m: f64 = (0..g.len()).map(|i| g.mass[i] * g.scale[i]).sum();
+            assert!((raster_m - grains_m).abs() < 1e-12 * grains_m, "{transfer:?}, {kernel:?}");
+            assert!(
+                (raster_p - before).length() < 1e-12 * grains_m,
+                "{transfer:?}, {kernel:?}: {raster_p:?} vs {before:?}"
+            );
+            step.finish(&mut st, &mut pipe, [], DT);
+            let after = weighted_momentum(&st.grains);
+            assert!(
+                (after - before).length() < 1e-12 * grains_m,
+                "{transfer:?}, {kernel:?}: {after:?} vs {before:?}"
+            );
+        }
+    }
+}
+
+/// One free grain in empty space (no gravity, no walls, no contacts).
+fn lone_grain(scale: f64, v0: DVec2) -> DemState<D2> {
+    let mut st = bed();
+    st.grains = Grains::default();
+    st.walls.clear();
+    st.params.gravity = DVec2::ZERO;
+    let i = st
+        .grains
+        .push(7, DVec2::new(0.0093, 0.0151), RADIUS, Grains::<D2>::mass_of(RADIUS, DENSITY), 0);
+    st.grains.scale[i] = scale;
+    st.grains.v[i] = v0;
+    st
+}
+
+fn close(a: DVec2, b: DVec2, tolerance: f64) -> bool {
+    (a - b).length() <= tolerance * b.length().max(1e-300)
+}
+
+/// With "flip" the coupling's acceleration of a step pushes the next step's substeps, and the
+/// raster the coupler gets leaves that push out. A lone hybrid grain (scale 0.75) at v0, every
+/// node of its raster constrained to u: it takes u (Alg. 5), and each node keeps the
+/// acceleration (u − v0)/dt. Next step the substeps push it with that acceleration on its
+/// scaled mass: velocity Verlet integrates a constant force exactly, so it reaches
+/// u + (u − v0), while every node's uncoupled velocity (the raster without the carried
+/// impulse) is u, what it would have without coupling. Where the coupler then leaves the
+/// nodes alone the push is taken back: the grain ends at u again.
+#[test]
+fn flip_carries_the_coupling_push_through_the_substeps_and_out_of_the_raster() {
+    let (v0, u) = (DVec2::new(0.01, 0.0), DVec2::new(0.02, -0.01));
+    let mut st = lone_grain(0.75, v0);
+    let mut pipe = DemPipeline::<D2>::new(1).unwrap();
+    let mut step = stage(GrainTransfer::Flip, Kernel::Bspline2);
+    let nodes: Vec<u64> = step.predict(&mut st, &mut pipe, DT, SUBSTEPS).iter().map(|r| r.node).collect();
+    assert!(nodes.len() >= 9);
+    assert_eq!(st.grains.external[0], DVec2::ZERO, "no push in the first step");
+    step.finish(&mut st, &mut pipe, nodes.iter().map(|&n| (n, u)), DT);
+    assert!(close(st.grains.v[0], u, 1e-12), "{:?} vs {u:?}", st.grains.v[0]);
+
+    let raster = step.predict(&mut st, &mut pipe, DT, SUBSTEPS).to_vec();
+    let push = (u - v0) * (1.0 / DT);
+    let g = &st.grains;
+    assert!(close(g.external[0], push * (g.mass[0] * 0.75), 1e-12), "push {:?}", g.external[0]);
+    assert!(close(g.v[0], u + (u - v0), 1e-12), "pushed: {:?}", g.v[0]);
+    for (k, r) in raster.iter().enumerate() {
+        assert!(close(r.momentum * (1.0 / r.mass), u + (u - v0), 1e-12), "node {}", r.node);
+        assert!(close(step.uncoupled_momentum(k) * (1.0 / r.mass), u, 1e-12), "node {}", r.node);
+    }
+    step.finish(&mut st, &mut pipe, [], DT);
+    assert!(close(st.grains.v[0], u, 1e-12), "taken back: {:?} vs {u:?}", st.grains.v[0]);
+}
+
+/// With "pic" (Alg. 5–6 as written) a hybrid grain moves from the position it had at the
+/// start of the step, not from where its substeps took it: given a uniform node velocity u it
+/// takes u, the field's spin (none), and ends at x_saved + u dt.
+#[test]
+fn pic_advects_from_the_saved_position() {
+    let (v0, u) = (DVec2::new(0.3, 0.1), DVec2::new(-0.02, 0.05));
+    let mut st = lone_grain(0.5, v0);
+    st.grains.omega[0] = 40.0;
+    let x0 = st.grains.x[0];
+    let mut pipe = DemPipeline::<D2>::new(1).unwrap();
+    let mut step = stage(GrainTransfer::Pic, GIMP);
+    let nodes: Vec<u64> = step.predict(&mut st, &mut pipe, DT, SUBSTEPS).iter().map(|r| r.node).collect();
+    assert!(close(st.grains.x[0], x0 + v0 * DT, 1e-12), "the substeps move it with v0");
+    step.finish(&mut st, &mut pipe, nodes.iter().map(|&n| (n, u)), DT);
+    let g = &st.grains;
+    assert!(close(g.v[0], u, 1e-12), "{:?} vs {u:?}", g.v[0]);
+    assert!(g.omega[0].abs() < 1e-9, "spin {}", g.omega[0]);
+    assert!(close(g.x[0], x0 + u * DT, 1e-14), "{:?} vs {:?}", g.x[0], x0 + u * DT);
+}
