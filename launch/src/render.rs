@@ -64,7 +64,10 @@ pub fn render(args: &RenderArgs) -> anyhow::Result<PathBuf> {
     };
     let (grains, points) = (read("grains")?, read("points")?);
     if grains.is_none() && points.is_none() {
-        bail!("{}: no frame of step {step} (frames are written every output.frames_every steps)", frames.display());
+        bail!(
+            "{}: no frame of step {step} (frames are written every output.frames_every steps)",
+            frames.display()
+        );
     }
     let point_half = 0.5 * scene.domain.cell_size / scene.mpm.points_per_axis as f64;
     let d = &scene.domain;
@@ -94,7 +97,11 @@ fn last_step(run: &Path) -> anyhow::Result<u64> {
             && let Some((_, file)) = collection(&pvd)?.pop()
         {
             let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("");
-            let step: u64 = stem.rsplit('_').next().and_then(|s| s.parse().ok()).context("a frame file without its step")?;
+            let step: u64 = stem
+                .rsplit('_')
+                .next()
+                .and_then(|s| s.parse().ok())
+                .context("a frame file without its step")?;
             last = last.max(Some(step));
         }
     }
@@ -112,7 +119,13 @@ fn material(f: &Frame, half: Option<f64>) -> anyhow::Result<Vec<([f64; 2], f64, 
         .iter()
         .zip(size)
         .enumerate()
-        .map(|(k, (x, s))| ([x[0], x[1]], s, (v[3 * k].powi(2) + v[3 * k + 1].powi(2) + v[3 * k + 2].powi(2)).sqrt()))
+        .map(|(k, (x, s))| {
+            (
+                [x[0], x[1]],
+                s,
+                (v[3 * k].powi(2) + v[3 * k + 1].powi(2) + v[3 * k + 2].powi(2)).sqrt(),
+            )
+        })
         .collect())
 }
 
@@ -126,7 +139,12 @@ pub fn size(view: &Scene2, width: u32) -> (u32, u32) {
 pub fn draw<DB: DrawingBackend>(view: &Scene2, colour: Colour, root: &DrawingArea<DB, plotters::coord::Shift>) -> anyhow::Result<()> {
     let (w, _) = root.dim_in_pixel();
     let scale = w as f64 / (view.max[0] - view.min[0]);
-    let at = |x: [f64; 2]| ((((x[0] - view.min[0]) * scale).round() as i32), (((view.max[1] - x[1]) * scale).round() as i32));
+    let at = |x: [f64; 2]| {
+        (
+            (((x[0] - view.min[0]) * scale).round() as i32),
+            (((view.max[1] - x[1]) * scale).round() as i32),
+        )
+    };
     let fastest = view.grains.iter().chain(&view.points).map(|m| m.2).fold(0.0, f64::max);
     let paint = |base: RGBColor, speed: f64| match colour {
         Colour::Model => base,
@@ -137,8 +155,11 @@ pub fn draw<DB: DrawingBackend>(view: &Scene2, colour: Colour, root: &DrawingAre
     for (x, half, speed) in &view.points {
         let r = ((half * scale).round() as i32).max(1);
         let (px, py) = at(*x);
-        root.draw(&Rectangle::new([(px - r, py - r), (px + r - 1, py + r - 1)], paint(CONTINUUM, *speed).filled()))
-            .map_err(fail)?;
+        root.draw(&Rectangle::new(
+            [(px - r, py - r), (px + r - 1, py + r - 1)],
+            paint(CONTINUUM, *speed).filled(),
+        ))
+        .map_err(fail)?;
     }
     for (x, radius, speed) in &view.grains {
         let r = ((radius * scale).round() as i32).max(1);
@@ -154,7 +175,11 @@ fn ramp(t: f64) -> RGBColor {
     let stops = [(30.0, 30.0, 110.0), (30.0, 150.0, 140.0), (250.0, 220.0, 40.0)];
     let (i, f) = if t < 0.5 { (0, 2.0 * t) } else { (1, 2.0 * t - 1.0) };
     let mix = |a: f64, b: f64| (a + f * (b - a)).round() as u8;
-    RGBColor(mix(stops[i].0, stops[i + 1].0), mix(stops[i].1, stops[i + 1].1), mix(stops[i].2, stops[i + 1].2))
+    RGBColor(
+        mix(stops[i].0, stops[i + 1].0),
+        mix(stops[i].1, stops[i + 1].1),
+        mix(stops[i].2, stops[i + 1].2),
+    )
 }
 
 #[cfg(test)]
@@ -176,7 +201,12 @@ mod tests {
         let (w, h) = size(&view, 1000);
         assert_eq!((w, h), (1000, 750));
         let mut px = vec![0u8; (w * h * 3) as usize];
-        draw(&view, Colour::Model, &BitMapBackend::with_buffer(&mut px, (w, h)).into_drawing_area()).unwrap();
+        draw(
+            &view,
+            Colour::Model,
+            &BitMapBackend::with_buffer(&mut px, (w, h)).into_drawing_area(),
+        )
+        .unwrap();
         let painted = |x: u32, y: u32| {
             let k = 3 * (y * w + x) as usize;
             (px[k], px[k + 1], px[k + 2]) != (BACKGROUND.0, BACKGROUND.1, BACKGROUND.2)
@@ -184,18 +214,38 @@ mod tests {
         for (cx, cy, r) in [(250u32, 250u32, 20u32), (700, 550, 10)] {
             // Painted inside, not beyond the radius (±1 px of rasterization), along both axes.
             for d in 0..r - 1 {
-                assert!(painted(cx + d, cy) && painted(cx - d, cy) && painted(cx, cy + d) && painted(cx, cy - d), "({cx}, {cy}) d = {d}");
+                assert!(
+                    painted(cx + d, cy) && painted(cx - d, cy) && painted(cx, cy + d) && painted(cx, cy - d),
+                    "({cx}, {cy}) d = {d}"
+                );
             }
             for d in [r + 2, r + 5] {
-                assert!(!painted(cx + d, cy) && !painted(cx - d, cy) && !painted(cx, cy + d) && !painted(cx, cy - d), "({cx}, {cy}) d = {d}");
+                assert!(
+                    !painted(cx + d, cy) && !painted(cx - d, cy) && !painted(cx, cy + d) && !painted(cx, cy - d),
+                    "({cx}, {cy}) d = {d}"
+                );
             }
-            // Its area is π r² pixels (within the rim's rasterization).
-            let n = (cy - r - 3..cy + r + 3).flat_map(|y| (cx - r - 3..cx + r + 3).map(move |x| (x, y))).filter(|&(x, y)| painted(x, y)).count() as f64;
-            let area = std::f64::consts::PI * (r * r) as f64;
-            assert!((n / area - 1.0).abs() < 0.15, "disk at ({cx}, {cy}): {n} px against π r² = {area:.0}");
+            // Its area says the same: the radius of a disk of that many pixels is r within a
+            // pixel (the rim's rasterization).
+            let n = (cy - r - 3..cy + r + 3)
+                .flat_map(|y| (cx - r - 3..cx + r + 3).map(move |x| (x, y)))
+                .filter(|&(x, y)| painted(x, y))
+                .count() as f64;
+            let radius = (n / std::f64::consts::PI).sqrt();
+            assert!(
+                (radius - r as f64).abs() <= 1.0,
+                "disk at ({cx}, {cy}): {n} px, the area of a disk of radius {radius:.2} px, not {r}"
+            );
         }
-        let total = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).filter(|&(x, y)| painted(x, y)).count() as f64;
-        let both = std::f64::consts::PI * (400.0 + 100.0);
-        assert!((total / both - 1.0).abs() < 0.15, "{total} px painted, two disks are {both:.0}");
+        // Nothing else is painted: all the pixels are the two disks' (each within a pixel of its radius).
+        let total = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| painted(x, y))
+            .count() as f64;
+        let (lo, hi) = (
+            std::f64::consts::PI * (19.0f64.powi(2) + 9.0f64.powi(2)),
+            std::f64::consts::PI * (21.0f64.powi(2) + 11.0f64.powi(2)),
+        );
+        assert!((lo..=hi).contains(&total), "{total} px painted, two disks are {lo:.0} to {hi:.0}");
     }
 }

@@ -679,7 +679,6 @@ fn report(args: &MpmArgs, results: &[(&Case, Vec<Run>)], loaded: bool) -> String
     for (case, runs) in results {
         table_rows(&mut t, case, runs);
         target_lines(&mut targets, case, runs);
-
     }
     t.push_str("\nTargets (issue): 1 thread ≥ 1.5× faster than Taichi PIC/FLIP f64 (≤ 0.18 µs/pt-step in 2D, ≤ 1.1 in 3D), 2 threads ≥ 1.8× faster than 1 on the largest case.\n\n");
     t.push_str(&targets);

@@ -48,9 +48,10 @@ impl Bridge {
             out_dir.to_path_buf(),
             stop.clone(),
         );
-        let handle = std::thread::Builder::new()
-            .name(Role::Bridge.binary().into())
-            .spawn(move || grains_bridge::serve(&bus, &cfg, &run_id, &scene, Some(&out_dir), &flag))?;
+        let handle = std::thread::Builder::new().name(Role::Bridge.binary().into()).spawn(move || {
+            grains_service::telemetry::set_participant(Role::Bridge.binary());
+            grains_bridge::serve(&bus, &cfg, &run_id, &scene, Some(&out_dir), &flag)
+        })?;
         Ok(Bridge::Thread(handle, stop))
     }
 

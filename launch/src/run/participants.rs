@@ -177,12 +177,15 @@ impl Threads {
                 out_dir: Some(out_dir.to_path_buf()),
             };
             let (scene, bus) = (scene.clone(), bus.clone());
-            let handle = std::thread::Builder::new().name(role.binary().into()).spawn(move || match role {
-                Role::Dem => grains_dem_service::run(&bus, &scene, &opts),
-                Role::Mpm => grains_mpm_service::run(&bus, &scene, &opts),
-                Role::Coupler => grains_coupler_service::run(&bus, &scene, &opts),
-                Role::Oracle => grains_oracle_service::run(&bus, &scene, &opts),
-                other => Err(anyhow::anyhow!("{} has no in-process participant in this build", other.binary())),
+            let handle = std::thread::Builder::new().name(role.binary().into()).spawn(move || {
+                grains_service::telemetry::set_participant(role.binary());
+                match role {
+                    Role::Dem => grains_dem_service::run(&bus, &scene, &opts),
+                    Role::Mpm => grains_mpm_service::run(&bus, &scene, &opts),
+                    Role::Coupler => grains_coupler_service::run(&bus, &scene, &opts),
+                    Role::Oracle => grains_oracle_service::run(&bus, &scene, &opts),
+                    other => Err(anyhow::anyhow!("{} has no in-process participant in this build", other.binary())),
+                }
             })?;
             threads.push((role, Some(handle), stop));
         }

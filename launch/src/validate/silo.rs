@@ -364,13 +364,19 @@ fn rates_section(md: &mut String, part: &mut Part, scene: &grains_protocol::scen
 }
 
 /// Beverloo fits over the flowing orifices, per model, with their chart.
-fn beverloo_section(md: &mut String, part: &mut Part, args: &ValidateArgs, scene: &grains_protocol::scene::Scene, all: &Runs) -> anyhow::Result<()> {
+fn beverloo_section(
+    md: &mut String,
+    part: &mut Part,
+    args: &ValidateArgs,
+    scene: &grains_protocol::scene::Scene,
+    all: &Runs,
+) -> anyhow::Result<()> {
     let material = &scene.materials[0];
     let bulk = material.density * material.mpm.as_ref().map_or(1.0, |m| m.packing);
     let g = scene.gravity[1].abs();
     let (orifices, models) = (&all.orifices, &all.models);
     let rate = |m: Model, w: f64| all.rate(m, w);
-        writeln!(
+    writeln!(
         md,
         "\n### Beverloo fits (2D: W = C ρ_b √g (w − k d)^{{3/2}}, ρ_b = {bulk:.0} kg/m³, d = 1 mm)\n"
     )?;

@@ -77,7 +77,7 @@ pub fn serve<T: Transport>(
     }
 
     let effective = cfg.effective(run);
-    eprintln!("grains-bridge: run {run}: {effective}");
+    tracing::info!("run {run}: {effective}");
     if let Some(dir) = out_dir {
         let text = serde_json::to_string_pretty(&effective)? + "\n";
         std::fs::write(dir.join("bridge.json"), text).with_context(|| format!("writing {}", dir.join("bridge.json").display()))?;
@@ -237,7 +237,7 @@ pub fn serve<T: Transport>(
             if last_dead_check.elapsed() > Duration::from_millis(500) {
                 last_dead_check = Instant::now();
                 if gather.latest_step().is_some() && summaries.publisher_count() == 0 {
-                    eprintln!("grains-bridge: run {run} has ended");
+                    tracing::info!("run {run} has ended");
                     break;
                 }
                 for dead in t.dead_peers() {

@@ -26,6 +26,7 @@ struct Cli {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    grains_service::telemetry::init(grains_protocol::Role::Bridge.binary());
     let run = || -> anyhow::Result<()> {
         let cfg = cli.bridge.resolve()?;
         let mut scene = grains_protocol::scene::load(&cli.scene)?;
@@ -39,7 +40,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("grains-bridge: error: {err:#}");
+            tracing::error!("{err:#}");
             ExitCode::FAILURE
         }
     }

@@ -55,6 +55,7 @@ pub fn participant_main(
     args: &cli::CommonArgs,
     body: impl FnOnce(&grains_transport::ipc::Iceoryx2, &grains_protocol::scene::Scene, &solver::ParticipantOptions) -> anyhow::Result<()>,
 ) -> std::process::ExitCode {
+    telemetry::init(role.binary());
     let run = || -> anyhow::Result<()> {
         let scene = grains_protocol::scene::load(&args.scene)?;
         let stop = signals::StopFlag::with_signals();
@@ -72,7 +73,7 @@ pub fn participant_main(
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("{}: error: {err:#}", role.binary());
+            tracing::error!("{err:#}");
             std::process::ExitCode::from(exit_code(&err))
         }
     }

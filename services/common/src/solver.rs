@@ -362,12 +362,13 @@ pub fn run<T: Transport, S: Solver>(
         let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
         };
+        crate::telemetry::set_step(Some(window.step));
         let mut wait = wait_start.elapsed();
         let compute_start = Instant::now();
         // Commands the time owner accepted after the previous step (sent before this begin).
         while let Some(Some(c)) = command_sub.receive(Duration::ZERO, |_, c| c.first().copied())? {
             if let Err(why) = solver.command(window.step - 1, &c) {
-                eprintln!("{}: warning: command {} not carried out: {why}", session.role.binary(), c.command);
+                tracing::warn!("command {} not carried out: {why}", c.command);
             }
         }
 
@@ -461,7 +462,7 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
         let go_on = clock.obey(session, step - 1, |c| match solver.command(step - 1, c) {
             Ok(()) => AckStatus::Applied,
             Err(why) => {
-                eprintln!("{}: command {} refused: {why}", session.role.binary(), c.command);
+                tracing::warn!("command {} refused: {why}", c.command);
                 AckStatus::Unsupported
             }
         })?;
@@ -469,6 +470,7 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
             break;
         }
         session.check_between_steps()?;
+        crate::telemetry::set_step(Some(step));
         let window = StepWindow::of(scene, step);
         let t = Instant::now();
         solver.step_alone(&window)?;

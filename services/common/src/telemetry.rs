@@ -22,8 +22,12 @@ use tracing_subscriber::fmt::format::Writer;
 use tracing_subscriber::fmt::{FmtContext, FormatEvent, FormatFields};
 use tracing_subscriber::registry::LookupSpan;
 
-/// The default filter: every grains crate at info, everything else (zenoh, iceoryx2, …) at warn.
-const DEFAULT_FILTER: &str = "warn,grains=info,grains_launch=info,grains_service=info,grains_bridge=info,\
+/// The default filter: every grains crate at info, everything else (zenoh, …) at warn.
+/// iceoryx2 (whose log comes through its `tracing` backend) stays at error, as its own console
+/// logger was, and so does zenoh's warning that gossip is off: the bridge turns it off on
+/// purpose (no scouting of any kind). `RUST_LOG` replaces all of it.
+const DEFAULT_FILTER: &str = "warn,iceoryx2_bb_loggers=error,zenoh::net::routing::hat::peer=error,\
+grains=info,grains_launch=info,grains_service=info,grains_bridge=info,\
 grains_dem_service=info,grains_mpm_service=info,grains_coupler_service=info,grains_oracle_service=info,\
 grains_transport=info,grains_protocol=info,grains_dem=info,grains_mpm=info,grains_oracle=info,grains_coupler=info";
 
@@ -43,6 +47,7 @@ pub fn init(who: &'static str) {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(false)
         .event_format(Line)
         .try_init();
 }

@@ -37,6 +37,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 
     let mut last = 0;
     for step in 1..=scene.steps {
+        grains_service::telemetry::set_step(Some(step));
         // Snapshot and set act on the solvers' state: checked here, carried out by both
         // solvers before the next step.
         let mut forward = Ok(());

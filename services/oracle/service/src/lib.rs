@@ -139,6 +139,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
         };
+        grains_service::telemetry::set_step(Some(window.step));
         let mut wait = wait_start.elapsed();
         report.mass = 0.0;
         report.momentum = [0.0; 3];
@@ -264,8 +265,8 @@ impl OracleState {
             Dimension::Two => epoch::plan::<D2>(&input, &self.settings, self.next_ids, &mut self.rng),
             Dimension::Three => epoch::plan::<D3>(&input, &self.settings, self.next_ids, &mut self.rng),
         };
-        if std::env::var_os("GRAINS_ORACLE_MAP").is_some() && scene.dim() == 2 {
-            eprint!("{}", zone_map(&cells, &plan, &solid, time));
+        if scene.dim() == 2 && tracing::enabled!(tracing::Level::DEBUG) {
+            tracing::debug!("zones of the epoch:\n{}", zone_map(&cells, &plan, &solid, time));
         }
         self.next_ids.0 += plan.new_grains.len() as u64;
         self.next_ids.1 += plan.new_points.len() as u64;
@@ -421,7 +422,7 @@ impl<T: Transport> Epochs<T> {
     }
 }
 
-/// The zones of a 2D epoch as text (`GRAINS_ORACLE_MAP=1`, for debugging scenes): a row of
+/// The zones of a 2D epoch as text (logged at debug level, `RUST_LOG=grains_oracle_service=debug`, for debugging scenes): a row of
 /// letters per cell row, top first, D/H/C (lower case behind a wall), and what changes.
 fn zone_map(cells: &grains_grid::Grid, plan: &epoch::Plan, solid: &[bool], time: f64) -> String {
     let n0 = cells.nodes[0] as usize;
