@@ -158,8 +158,6 @@ pub fn new_run_id() -> String {
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
-    // The text has every file path of the scene made absolute: the participants read this
-    // copy of it in the run's directory.
     let roles = scene.participants();
     if scene.synthetic.is_none() {
         check_physics(&scene)?;
@@ -178,19 +176,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             "--external needs --transport ipc: an external participant is another process".into()
         ));
     }
-    // The bridge: asked for on the command line, or by the scene's [bridge] table.
-    // The scene's settings file is the base; flags on the command line override it.
-    let bridge_args = match (&opts.bridge, &scene.bridge) {
-        (Some(args), b) => Some(BridgeArgs {
-            config: args.config.clone().or_else(|| b.as_ref().and_then(|b| b.settings.clone())),
-            ..args.clone()
-        }),
-        (None, Some(b)) => Some(BridgeArgs {
-            config: b.settings.clone(),
-            ..BridgeArgs::default()
-        }),
-        (None, None) => None,
-    };
+    let bridge_args = bridge_args(opts, &scene);
     let bridge_cfg = match &bridge_args {
         Some(args) => Some(args.resolve().map_err(|e| BadInput(format!("{e:#}")))?),
         None => None,
@@ -204,8 +190,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let run_id = new_run_id();
     let dir = opts.out_root.join(&scene.name).join(&run_id);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
-    // The exact scene of the run (overrides applied) sits beside its outputs; every
-    // participant reads this copy.
+    // The exact scene of the run (overrides applied, file paths made absolute) sits beside its
+    // outputs; every participant reads this copy.
     let scene_copy = dir.join("scene.toml");
     write_atomic(&scene_copy, text.as_bytes()).with_context(|| format!("writing {}", scene_copy.display()))?;
     let scene_path = std::fs::canonicalize(&scene_copy).with_context(|| format!("resolving {}", scene_copy.display()))?;
@@ -250,6 +236,22 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     };
     write_summary(&ctx, &report, participants, started)?;
     Ok(report)
+}
+
+/// The bridge's flags: asked for on the command line, or by the scene's `[bridge]` table. The
+/// scene's settings file is the base; flags on the command line override it.
+fn bridge_args(opts: &RunOptions, scene: &Scene) -> Option<BridgeArgs> {
+    match (&opts.bridge, &scene.bridge) {
+        (Some(args), b) => Some(BridgeArgs {
+            config: args.config.clone().or_else(|| b.as_ref().and_then(|b| b.settings.clone())),
+            ..args.clone()
+        }),
+        (None, Some(b)) => Some(BridgeArgs {
+            config: b.settings.clone(),
+            ..BridgeArgs::default()
+        }),
+        (None, None) => None,
+    }
 }
 
 /// What every part of the launcher needs to know of the run.

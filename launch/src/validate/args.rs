@@ -1,10 +1,10 @@
-//! What `grains validate` is asked to do: its flags, and the registry of its parts.
+//! What `grains validate` is asked to do: its flags, and the registry of its parts (their
+//! names, order and whether CI runs them; `super::run_part` runs one).
 
-use crate::report::Part;
 use std::path::PathBuf;
 
 /// The parts of the validation, in the order they run: the one registry of cases, with
-/// what each checks, whether CI's `--quick` runs it, and the function that runs it.
+/// what each checks and whether CI's `--quick` runs it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum PartName {
     /// DEM restitution of a head-on impact against its analytic value.
@@ -45,17 +45,6 @@ impl PartName {
     /// In CI's `--quick` set (the drum and the accuracy–cost runs take too long for it).
     pub fn quick(self) -> bool {
         !matches!(self, PartName::Drum | PartName::Cost)
-    }
-
-    pub fn run(self, args: &ValidateArgs) -> anyhow::Result<Part> {
-        match self {
-            PartName::Contact => super::contact::validate(args),
-            PartName::Stability => super::stability::validate(args),
-            PartName::Column => super::column::validate(args),
-            PartName::Silo => super::silo::validate(args),
-            PartName::Drum => super::drum::validate(args),
-            PartName::Cost => super::cost::validate(args),
-        }
     }
 }
 
