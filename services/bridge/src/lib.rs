@@ -60,22 +60,7 @@ pub fn serve<T: Transport>(
     stop: &StopFlag,
 ) -> anyhow::Result<()> {
     cfg.check()?;
-    let mut summaries = t.subscriber::<Summary, StepHeader>(&names::SUMMARY)?;
-    let mut acks = t.subscriber::<Ack, StepHeader>(&names::ACK)?;
-    // No control port at all unless steering is on.
-    let mut control = match cfg.steering {
-        true => Some(t.publisher::<Control, StepHeader>(&names::CONTROL, 1)?),
-        false => None,
-    };
-    // Views of the solvers of this run (a DEM-only run has no MPM view).
-    let roles = scene.participants();
-    let mut views = Vec::new();
-    for (role, spec) in [(Role::Dem, names::DEM_VIEW), (Role::Mpm, names::MPM_VIEW)] {
-        if roles.contains(&role) {
-            views.push((role, t.subscriber::<ViewPoint, StepHeader>(&spec)?));
-        }
-    }
-
+    let mut ports = Ports::open(t, cfg, scene)?;
     let effective = cfg.effective(run);
     tracing::info!("run {run}: {effective}");
     if let Some(dir) = out_dir {
@@ -86,186 +71,325 @@ pub fn serve<T: Transport>(
         .wait()
         .map_err(|e| anyhow::anyhow!("grains-bridge: cannot open zenoh on {:?}: {e}", cfg.listen))?;
     let (tx, rx) = mpsc::channel();
-    let tx_state = tx.clone();
-    let _state_q = session
-        .declare_queryable(keys::state_all(run))
-        .callback(move |q| {
-            let _ = tx_state.send(Incoming::State(q));
-        })
-        .wait()
-        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::state_all(run)))?;
-    let _control_q = session
-        .declare_queryable(keys::control(run))
-        .callback(move |q| {
-            let _ = tx.send(Incoming::Control(q));
-        })
-        .wait()
-        .map_err(|e| anyhow::anyhow!("declaring {}: {e}", keys::control(run)))?;
-    let view_roles: Vec<Role> = views.iter().map(|(r, _)| *r).collect();
+    let _state_q = queryable(&session, keys::state_all(run), tx.clone(), Incoming::State)?;
+    let _control_q = queryable(&session, keys::control(run), tx, Incoming::Control)?;
+    let view_roles: Vec<Role> = ports.views.iter().map(|(r, _)| *r).collect();
     let outbox = Outbox::open(&session, run, &view_roles)?;
     let (out_tx, out_rx) = mpsc::channel::<Out>();
 
     std::thread::scope(|scope| -> anyhow::Result<()> {
         let sender = scope.spawn(move || outbox.run(out_rx));
-        let out = |o: Out| {
-            let _ = out_tx.send(o);
-        };
-        let mut alive: Vec<Role> = Vec::new();
-        let mut latest_views: HashMap<Role, serde_json::Value> = HashMap::new();
-        let mut gather = state::Gather::new(&roles);
-        let mut paused = false;
-        let mut seq = SEQ_BASE;
-        let mut pending = Pending::new();
-        let mut published: Option<(u64, Instant, bool)> = None;
-        let mut last_dead_check = Instant::now();
-        let min_interval = if cfg.rate > 0.0 {
-            Duration::from_secs_f64(1.0 / cfg.rate)
-        } else {
-            Duration::ZERO
-        };
-        let doc = |gather: &state::Gather, paused: bool| gather.document(run, &scene.name, scene.steps, paused);
-
+        let mut bridge = Bridge::new(&mut ports, cfg, run, scene, effective, Outgoing(out_tx));
         while !stop.is_set() {
-            // Summaries: wait up to 20 ms for one, then drain.
-            let mut timeout = Duration::from_millis(20);
-            while let Some(s) = summaries.receive(timeout, |_, s| s.first().copied())? {
-                timeout = Duration::ZERO;
-                let Some(s) = s else { continue };
-                if let Some(role) = Role::from_code(s.role)
-                    && !alive.contains(&role)
-                {
-                    alive.push(role);
-                    out(Out::Alive(role, true));
-                }
-                gather.add(s);
-            }
-
-            // Views: the latest of each solver.
-            for (role, sub) in &mut views {
-                while let Some(v) = sub.receive(Duration::ZERO, |h, pts| state::view_document(run, *role, h, pts))? {
-                    out(Out::View(*role, v.to_string()));
-                    latest_views.insert(*role, v);
-                }
-            }
-
-            // Acknowledgements of our commands (and the launcher's: they change the pause state).
-            drain_acks(&mut acks, &mut pending, &mut paused, &out)?;
-            let now = Instant::now();
-            pending.retain(|_, (q, c, since)| {
-                let expired = now.duration_since(*since) > ACK_TIMEOUT;
-                if expired {
-                    let why = format!(
-                        "{}: not acknowledged by the time owner within {} s: it may still take effect (a long step), or the run has ended",
-                        c.command.name(),
-                        ACK_TIMEOUT.as_secs()
-                    );
-                    out(Out::Error(q.clone(), error_json(&why)));
-                }
-                !expired
-            });
-
-            // Queries from clients.
+            bridge.take_summaries()?;
+            bridge.take_views()?;
+            bridge.take_acks()?;
             while let Ok(incoming) = rx.try_recv() {
                 match incoming {
-                    Incoming::State(q) => {
-                        let mut answers = vec![
-                            (keys::summary(run), doc(&gather, paused)),
-                            (keys::config(run), Some(effective.clone())),
-                        ];
-                        answers.extend(latest_views.iter().map(|(role, v)| (keys::view(run, role.name()), Some(v.clone()))));
-                        for (key, value) in answers {
-                            let Some(value) = value else { continue };
-                            if let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key.as_str())
-                                && q.key_expr().intersects(&k)
-                            {
-                                out(Out::Reply(q.clone(), key, value.to_string()));
-                            }
-                        }
-                    }
-                    Incoming::Control(q) => {
-                        let payload = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
-                        let Some(control) = control.as_mut() else {
-                            let why = "steering is disabled for this run: every command is refused (start it with grains run --bridge --steering)";
-                            out(Out::Error(q, error_json(why)));
-                            continue;
-                        };
-                        if pending.len() >= MAX_IN_FLIGHT {
-                            let why = format!("busy: {MAX_IN_FLIGHT} commands are waiting for the run's acknowledgement; retry");
-                            out(Out::Error(q, error_json(&why)));
-                            continue;
-                        }
-                        match command::parse(&payload, scene.walls.len()) {
-                            Err(why) => out(Out::Error(q, error_json(&why))),
-                            Ok(c) => {
-                                seq += 1;
-                                let header = StepHeader {
-                                    protocol_version: PROTOCOL_VERSION,
-                                    sender: Role::Bridge as u32,
-                                    step: gather.latest_step().unwrap_or(0),
-                                    run_id: run_id_bytes(run),
-                                    ..StepHeader::default()
-                                };
-                                let msg = Control {
-                                    seq,
-                                    command: c.command as u32,
-                                    key: c.key,
-                                    value: c.value,
-                                };
-                                control.publish(1, |h, out| {
-                                    *h = header;
-                                    out[0] = msg;
-                                })?;
-                                pending.insert(seq, (q, c, Instant::now()));
-                            }
-                        }
-                    }
+                    Incoming::State(q) => bridge.answer_state(q),
+                    Incoming::Control(q) => bridge.forward_command(q)?,
                 }
             }
-
-            // The latest complete step, at most `rate` times a second, and at once when the
-            // run pauses or resumes (no new step says so).
-            if let Some(step) = gather.latest_step()
-                && published.is_none_or(|(s, at, p)| (s < step && at.elapsed() >= min_interval) || p != paused)
-                && let Some(d) = doc(&gather, paused)
-            {
-                out(Out::Summary(d.to_string()));
-                published = Some((step, Instant::now(), paused));
-            }
-
-            // Participants that died lose their token; once every participant has gone, the
-            // run is over and so is the bridge (one started by hand is not told).
-            if last_dead_check.elapsed() > Duration::from_millis(500) {
-                last_dead_check = Instant::now();
-                if gather.latest_step().is_some() && summaries.publisher_count() == 0 {
-                    tracing::info!("run {run} has ended");
-                    break;
-                }
-                for dead in t.dead_peers() {
-                    alive.retain(|role| {
-                        let gone = dead.starts_with(&format!("{} ", role.binary()));
-                        if gone {
-                            out(Out::Alive(*role, false));
-                        }
-                        !gone
-                    });
-                }
+            bridge.publish_summary();
+            if bridge.run_has_ended(t) {
+                break;
             }
         }
-        // A stop's acknowledgement is sent just before the run ends, which is when we are
-        // told to stop: it is still queued.
-        drain_acks(&mut acks, &mut pending, &mut paused, &out)?;
-        for (q, c, _) in pending.into_values() {
-            out(Out::Error(
-                q,
-                error_json(&format!("{}: the bridge is shutting down", c.command.name())),
-            ));
-        }
-        drop(out_tx);
+        bridge.shut_down()?;
         sender.join().map_err(|_| anyhow::anyhow!("the bridge's outbox thread panicked"))?;
         Ok(())
     })?;
     let _ = session.close().wait();
     Ok(())
+}
+
+/// A queryable on `key` that hands every query to `tx`, as `incoming` makes it.
+fn queryable(
+    session: &zenoh::Session,
+    key: String,
+    tx: mpsc::Sender<Incoming>,
+    incoming: fn(Query) -> Incoming,
+) -> anyhow::Result<zenoh::query::Queryable<()>> {
+    session
+        .declare_queryable(key.clone())
+        .callback(move |q| {
+            let _ = tx.send(incoming(q));
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring {key}: {e}"))
+}
+
+/// The bridge's ports on the run. (Fields in the reverse of the order they are opened in:
+/// they close in the order they did as locals of [`serve`].)
+struct Ports<T: Transport> {
+    /// The views of the solvers of this run (a DEM-only run has no MPM view).
+    views: Vec<(Role, T::Subscriber<ViewPoint, StepHeader>)>,
+    /// No control port at all unless steering is on.
+    control: Option<T::Publisher<Control, StepHeader>>,
+    acks: T::Subscriber<Ack, StepHeader>,
+    summaries: T::Subscriber<Summary, StepHeader>,
+}
+
+impl<T: Transport> Ports<T> {
+    fn open(t: &T, cfg: &BridgeConfig, scene: &Scene) -> anyhow::Result<Self> {
+        let summaries = t.subscriber::<Summary, StepHeader>(&names::SUMMARY)?;
+        let acks = t.subscriber::<Ack, StepHeader>(&names::ACK)?;
+        let control = match cfg.steering {
+            true => Some(t.publisher::<Control, StepHeader>(&names::CONTROL, 1)?),
+            false => None,
+        };
+        let roles = scene.participants();
+        let mut views = Vec::new();
+        for (role, spec) in [(Role::Dem, names::DEM_VIEW), (Role::Mpm, names::MPM_VIEW)] {
+            if roles.contains(&role) {
+                views.push((role, t.subscriber::<ViewPoint, StepHeader>(&spec)?));
+            }
+        }
+        Ok(Ports {
+            views,
+            control,
+            acks,
+            summaries,
+        })
+    }
+}
+
+/// The bridge's end of the channel to the outbox thread.
+struct Outgoing(mpsc::Sender<Out>);
+
+impl Outgoing {
+    /// Hands `o` to the outbox (gone only when the bridge stops: then nothing goes out).
+    fn send(&self, o: Out) {
+        let _ = self.0.send(o);
+    }
+}
+
+/// What the bridge knows of the run while it serves it, and the commands it waits on.
+struct Bridge<'a, T: Transport> {
+    ports: &'a mut Ports<T>,
+    run: &'a str,
+    scene: &'a Scene,
+    /// The effective settings (answered under `state/config`).
+    effective: serde_json::Value,
+    out: Outgoing,
+    /// Participants whose liveliness token is declared.
+    alive: Vec<Role>,
+    latest_views: HashMap<Role, serde_json::Value>,
+    gather: state::Gather,
+    paused: bool,
+    /// Sequence number of the last command sent.
+    seq: u64,
+    pending: Pending,
+    /// The last summary published: its step, when, and the pause state it showed.
+    published: Option<(u64, Instant, bool)>,
+    last_dead_check: Instant,
+    /// Between two summaries at least (from `rate`).
+    min_interval: Duration,
+}
+
+impl<'a, T: Transport> Bridge<'a, T> {
+    fn new(
+        ports: &'a mut Ports<T>,
+        cfg: &BridgeConfig,
+        run: &'a str,
+        scene: &'a Scene,
+        effective: serde_json::Value,
+        out: Outgoing,
+    ) -> Self {
+        Bridge {
+            ports,
+            run,
+            scene,
+            effective,
+            out,
+            alive: Vec::new(),
+            latest_views: HashMap::new(),
+            gather: state::Gather::new(&scene.participants()),
+            paused: false,
+            seq: SEQ_BASE,
+            pending: Pending::new(),
+            published: None,
+            last_dead_check: Instant::now(),
+            min_interval: if cfg.rate > 0.0 {
+                Duration::from_secs_f64(1.0 / cfg.rate)
+            } else {
+                Duration::ZERO
+            },
+        }
+    }
+
+    /// The summary document of the latest complete step, if there is one.
+    fn document(&self) -> Option<serde_json::Value> {
+        self.gather.document(self.run, &self.scene.name, self.scene.steps, self.paused)
+    }
+
+    /// Summaries: waits up to 20 ms for one, then drains them. A participant's first summary
+    /// declares its liveliness token.
+    fn take_summaries(&mut self) -> anyhow::Result<()> {
+        let mut timeout = Duration::from_millis(20);
+        while let Some(s) = self.ports.summaries.receive(timeout, |_, s| s.first().copied())? {
+            timeout = Duration::ZERO;
+            let Some(s) = s else { continue };
+            if let Some(role) = Role::from_code(s.role)
+                && !self.alive.contains(&role)
+            {
+                self.alive.push(role);
+                self.out.send(Out::Alive(role, true));
+            }
+            self.gather.add(s);
+        }
+        Ok(())
+    }
+
+    /// Views: the latest of each solver.
+    fn take_views(&mut self) -> anyhow::Result<()> {
+        let run = self.run;
+        for (role, sub) in &mut self.ports.views {
+            while let Some(v) = sub.receive(Duration::ZERO, |h, pts| state::view_document(run, *role, h, pts))? {
+                self.out.send(Out::View(*role, v.to_string()));
+                self.latest_views.insert(*role, v);
+            }
+        }
+        Ok(())
+    }
+
+    /// Acknowledgements of our commands (and the launcher's: they change the pause state);
+    /// the commands that waited for theirs longer than [`ACK_TIMEOUT`] are answered with an
+    /// error.
+    fn take_acks(&mut self) -> anyhow::Result<()> {
+        let out = &self.out;
+        drain_acks(&mut self.ports.acks, &mut self.pending, &mut self.paused, &|o| out.send(o))?;
+        let now = Instant::now();
+        self.pending.retain(|_, (q, c, since)| {
+            let expired = now.duration_since(*since) > ACK_TIMEOUT;
+            if expired {
+                let why = format!(
+                    "{}: not acknowledged by the time owner within {} s: it may still take effect (a long step), or the run has ended",
+                    c.command.name(),
+                    ACK_TIMEOUT.as_secs()
+                );
+                out.send(Out::Error(q.clone(), error_json(&why)));
+            }
+            !expired
+        });
+        Ok(())
+    }
+
+    /// A client's query of the state: the summary, the settings and the latest views, those
+    /// of them its key expression covers.
+    fn answer_state(&self, q: Query) {
+        let run = self.run;
+        let mut answers = vec![
+            (keys::summary(run), self.document()),
+            (keys::config(run), Some(self.effective.clone())),
+        ];
+        answers.extend(
+            self.latest_views
+                .iter()
+                .map(|(role, v)| (keys::view(run, role.name()), Some(v.clone()))),
+        );
+        for (key, value) in answers {
+            let Some(value) = value else { continue };
+            if let Ok(k) = zenoh::key_expr::KeyExpr::try_from(key.as_str())
+                && q.key_expr().intersects(&k)
+            {
+                self.out.send(Out::Reply(q.clone(), key, value.to_string()));
+            }
+        }
+    }
+
+    /// A client's command: refused without steering, when too many wait already, or when
+    /// [`command::parse`] refuses it; else sent to the time owner, answered when it
+    /// acknowledges.
+    fn forward_command(&mut self, q: Query) -> anyhow::Result<()> {
+        let payload = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
+        let Some(control) = self.ports.control.as_mut() else {
+            let why = "steering is disabled for this run: every command is refused (start it with grains run --bridge --steering)";
+            self.out.send(Out::Error(q, error_json(why)));
+            return Ok(());
+        };
+        if self.pending.len() >= MAX_IN_FLIGHT {
+            let why = format!("busy: {MAX_IN_FLIGHT} commands are waiting for the run's acknowledgement; retry");
+            self.out.send(Out::Error(q, error_json(&why)));
+            return Ok(());
+        }
+        match command::parse(&payload, self.scene.walls.len()) {
+            Err(why) => self.out.send(Out::Error(q, error_json(&why))),
+            Ok(c) => {
+                self.seq += 1;
+                let header = StepHeader {
+                    protocol_version: PROTOCOL_VERSION,
+                    sender: Role::Bridge as u32,
+                    step: self.gather.latest_step().unwrap_or(0),
+                    run_id: run_id_bytes(self.run),
+                    ..StepHeader::default()
+                };
+                let msg = Control {
+                    seq: self.seq,
+                    command: c.command as u32,
+                    key: c.key,
+                    value: c.value,
+                };
+                control.publish(1, |h, out| {
+                    *h = header;
+                    out[0] = msg;
+                })?;
+                self.pending.insert(self.seq, (q, c, Instant::now()));
+            }
+        }
+        Ok(())
+    }
+
+    /// The latest complete step, at most `rate` times a second, and at once when the run
+    /// pauses or resumes (no new step says so).
+    fn publish_summary(&mut self) {
+        if let Some(step) = self.gather.latest_step()
+            && self
+                .published
+                .is_none_or(|(s, at, p)| (s < step && at.elapsed() >= self.min_interval) || p != self.paused)
+            && let Some(d) = self.document()
+        {
+            self.out.send(Out::Summary(d.to_string()));
+            self.published = Some((step, Instant::now(), self.paused));
+        }
+    }
+
+    /// Every 500 ms: participants that died lose their token; once every participant has
+    /// gone, the run is over and so is the bridge (one started by hand is not told).
+    fn run_has_ended(&mut self, t: &T) -> bool {
+        if self.last_dead_check.elapsed() > Duration::from_millis(500) {
+            self.last_dead_check = Instant::now();
+            if self.gather.latest_step().is_some() && self.ports.summaries.publisher_count() == 0 {
+                tracing::info!("run {} has ended", self.run);
+                return true;
+            }
+            for dead in t.dead_peers() {
+                self.alive.retain(|role| {
+                    let gone = dead.starts_with(&format!("{} ", role.binary()));
+                    if gone {
+                        self.out.send(Out::Alive(*role, false));
+                    }
+                    !gone
+                });
+            }
+        }
+        false
+    }
+
+    /// On the way out: a stop's acknowledgement is sent just before the run ends, which is
+    /// when we are told to stop: it is still queued. Every command still waiting is answered;
+    /// then the channel to the outbox closes.
+    fn shut_down(mut self) -> anyhow::Result<()> {
+        let out = &self.out;
+        drain_acks(&mut self.ports.acks, &mut self.pending, &mut self.paused, &|o| out.send(o))?;
+        for (q, c, _) in self.pending.into_values() {
+            self.out.send(Out::Error(
+                q,
+                error_json(&format!("{}: the bridge is shutting down", c.command.name())),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// What goes out over zenoh.

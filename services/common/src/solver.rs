@@ -324,93 +324,175 @@ pub fn run<T: Transport, S: Solver>(
         let mut solver = make(&ZoneField::layered(scene))?;
         return run_alone(&mut session, scene, &mut solver);
     }
-    let raster_spec = if role == Role::Dem { names::DEM_RASTER } else { names::MPM_RASTER };
-    let mut step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
-    let mut vel_sub = session.subscriber::<NodeVelocity, StepHeader>(&names::VELOCITIES)?;
-    let mut raster_pub = session.publisher::<RasterNode, StepHeader>(&raster_spec, 1024)?;
-    let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
-    let mut command_sub = session.subscriber::<Control, StepHeader>(&names::COMMAND)?;
-    let mut viewer = Viewer::open(&session)?;
-    let mut zones_sub = match scene.participants().contains(&Role::Oracle) {
-        true => Some(session.subscriber::<ZoneCell, StepHeader>(&names::ZONES)?),
-        false => None,
-    };
-    let adaptive = scene.oracle.as_ref().is_some_and(|o| o.kind.adaptive()) && zones_sub.is_some();
-    let mut epochs = if adaptive { Some(EpochPorts::<T>::open(&session)?) } else { None };
-    session.wait_until("the coupler, the oracle and the launcher", |_| {
-        step_sub.publisher_count() >= 1
-            && command_sub.publisher_count() >= 1
-            && vel_sub.publisher_count() >= 1
-            && raster_pub.subscriber_count() >= 1
-            && summary_pub.subscriber_count() >= 1
-            && zones_sub.as_ref().is_none_or(|z| z.publisher_count() >= 1)
-            && epochs.as_mut().is_none_or(EpochPorts::connected)
-    })?;
-    let zones = match &mut zones_sub {
-        Some(sub) => session.recv(sub, "the zone field", |h, cells| -> anyhow::Result<ZoneField> {
-            session.check_message(&names::ZONES, h, 0, cells)?;
-            ZoneField::from_cells(scene, cells).map_err(|e| anyhow::anyhow!("{}: {e}", names::ZONES.name))
-        })??,
-        None => ZoneField::layered(scene),
-    };
+    let mut ports = CoupledPorts::<T>::open(&session, scene)?;
+    session.wait_until("the coupler, the oracle and the launcher", |_| ports.connected())?;
+    let zones = ports.initial_zones(&session, scene)?;
     let mut solver = make(&zones)?;
-    let solver = &mut solver;
     session.ready()?;
-
     loop {
         let wait_start = Instant::now();
-        let Some(window) = next_step(&session, &mut step_sub)? else {
+        let Some(window) = next_step(&session, &mut ports.step_sub)? else {
             return Ok(());
         };
         crate::telemetry::set_step(Some(window.step));
-        let mut wait = wait_start.elapsed();
-        let compute_start = Instant::now();
-        // Commands the time owner accepted after the previous step (sent before this begin).
-        while let Some(Some(c)) = command_sub.receive(Duration::ZERO, |_, c| c.first().copied())? {
-            if let Err(why) = solver.command(window.step - 1, &c) {
-                tracing::warn!("command {} not carried out: {why}", c.command);
-            }
-        }
+        let wait = wait_start.elapsed();
+        ports.step(&session, scene, opts, &window, &mut solver, wait)?;
+    }
+}
 
-        let n = solver.predict(&window)?;
-        let header = session.header(window.step, window.time, window.dt);
-        let mut sent_checksum = 0;
-        raster_pub.publish(n, |hdr, out| {
-            solver.write_raster(&window, out);
-            *hdr = header;
-            if opts.checksums {
-                hdr.checksum = checksum_bytes(as_bytes(out));
-                sent_checksum = hdr.checksum;
-            }
-        })?;
+/// The ports of a solver that the coupler drives. (Fields in the reverse of the order they
+/// are opened in: they close in the order they did as the loop's locals, the step begins last.)
+struct CoupledPorts<T: Transport> {
+    /// Oracle epochs, when the run's oracle is adaptive.
+    epochs: Option<EpochPorts<T>>,
+    /// The oracle's zones, when the run has an oracle.
+    zones_sub: Option<T::Subscriber<ZoneCell, StepHeader>>,
+    viewer: Option<Viewer<T>>,
+    command_sub: T::Subscriber<Control, StepHeader>,
+    summary_pub: T::Publisher<Summary, StepHeader>,
+    raster_pub: T::Publisher<RasterNode, StepHeader>,
+    vel_sub: T::Subscriber<NodeVelocity, StepHeader>,
+    step_sub: T::Subscriber<StepBegin, StepHeader>,
+}
+
+impl<T: Transport> CoupledPorts<T> {
+    fn open(session: &Session<'_, T>, scene: &Scene) -> anyhow::Result<Self> {
+        let raster_spec = if session.role == Role::Dem {
+            names::DEM_RASTER
+        } else {
+            names::MPM_RASTER
+        };
+        let step_sub = session.subscriber::<StepBegin, StepHeader>(&names::STEP_BEGIN)?;
+        let vel_sub = session.subscriber::<NodeVelocity, StepHeader>(&names::VELOCITIES)?;
+        let raster_pub = session.publisher::<RasterNode, StepHeader>(&raster_spec, 1024)?;
+        let summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+        let command_sub = session.subscriber::<Control, StepHeader>(&names::COMMAND)?;
+        let viewer = Viewer::open(session)?;
+        let zones_sub = match scene.participants().contains(&Role::Oracle) {
+            true => Some(session.subscriber::<ZoneCell, StepHeader>(&names::ZONES)?),
+            false => None,
+        };
+        let adaptive = scene.oracle.as_ref().is_some_and(|o| o.kind.adaptive()) && zones_sub.is_some();
+        let epochs = if adaptive { Some(EpochPorts::<T>::open(session)?) } else { None };
+        Ok(CoupledPorts {
+            epochs,
+            zones_sub,
+            viewer,
+            command_sub,
+            summary_pub,
+            raster_pub,
+            vel_sub,
+            step_sub,
+        })
+    }
+
+    /// The coupler, the oracle (if any) and the launcher are connected.
+    fn connected(&mut self) -> bool {
+        self.step_sub.publisher_count() >= 1
+            && self.command_sub.publisher_count() >= 1
+            && self.vel_sub.publisher_count() >= 1
+            && self.raster_pub.subscriber_count() >= 1
+            && self.summary_pub.subscriber_count() >= 1
+            && self.zones_sub.as_ref().is_none_or(|z| z.publisher_count() >= 1)
+            && self.epochs.as_mut().is_none_or(EpochPorts::connected)
+    }
+
+    /// The zone field to build the solver from: the oracle's (step 0) when the run has one,
+    /// else the layered zones of the scene.
+    fn initial_zones(&mut self, session: &Session<'_, T>, scene: &Scene) -> anyhow::Result<ZoneField> {
+        Ok(match &mut self.zones_sub {
+            Some(sub) => session.recv(sub, "the zone field", |h, cells| -> anyhow::Result<ZoneField> {
+                session.check_message(&names::ZONES, h, 0, cells)?;
+                ZoneField::from_cells(scene, cells).map_err(|e| anyhow::anyhow!("{}: {e}", names::ZONES.name))
+            })??,
+            None => ZoneField::layered(scene),
+        })
+    }
+
+    /// One macro-step of `window` (Yue 2018 Alg. 1), once its step begin is in (after
+    /// `wait`): the commands the time owner accepted, predict and send the raster, finish with
+    /// the coupler's velocities, the oracle's epoch if one is due; then the summary and a view.
+    fn step<S: Solver>(
+        &mut self,
+        session: &Session<'_, T>,
+        scene: &Scene,
+        opts: &ParticipantOptions,
+        window: &StepWindow,
+        solver: &mut S,
+        mut wait: Duration,
+    ) -> anyhow::Result<()> {
+        let compute_start = Instant::now();
+        self.apply_commands(window, solver)?;
+        let sent_checksum = self.send_raster(session, window, solver, opts.checksums)?;
         let mut compute = compute_start.elapsed();
 
         let wait_start = Instant::now();
-        let mut finish_time = Duration::ZERO;
-        session.recv(&mut vel_sub, "the constrained velocities", |h, v| -> anyhow::Result<()> {
-            session.check_message(&names::VELOCITIES, h, window.step, v)?;
-            let t = Instant::now();
-            solver.finish(&window, v)?;
-            finish_time = t.elapsed();
-            Ok(())
-        })??;
+        let finish_time = self.finish(session, window, solver)?;
         wait += wait_start.elapsed() - finish_time;
         compute += finish_time;
-        if let (Some(e), Some(z)) = (&mut epochs, &mut zones_sub)
+        if let (Some(e), Some(z)) = (&mut self.epochs, &mut self.zones_sub)
             && scene.epoch_after(window.step)
         {
             // Counted as compute: the oracle's planning is part of the step's work.
             let t = Instant::now();
-            e.exchange(&session, scene, z, &window, solver)?;
+            e.exchange(session, scene, z, window, solver)?;
             compute += t.elapsed();
         }
 
         let mut report = solver.report();
         report.checksum = sent_checksum;
-        publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
-        if let Some(v) = &mut viewer {
-            v.offer(&session, &window, &*solver)?;
+        publish_summary(session, &mut self.summary_pub, window, &report, compute, wait)?;
+        if let Some(v) = &mut self.viewer {
+            v.offer(session, window, &*solver)?;
         }
+        Ok(())
+    }
+
+    /// Commands the time owner accepted after the previous step (sent before this begin).
+    fn apply_commands<S: Solver>(&mut self, window: &StepWindow, solver: &mut S) -> anyhow::Result<()> {
+        while let Some(Some(c)) = self.command_sub.receive(Duration::ZERO, |_, c| c.first().copied())? {
+            if let Err(why) = solver.command(window.step - 1, &c) {
+                tracing::warn!("command {} not carried out: {why}", c.command);
+            }
+        }
+        Ok(())
+    }
+
+    /// Advances the solver to the coupling point and sends its raster; returns the raster's
+    /// checksum (0 without checksums).
+    fn send_raster<S: Solver>(
+        &mut self,
+        session: &Session<'_, T>,
+        window: &StepWindow,
+        solver: &mut S,
+        checksums: bool,
+    ) -> anyhow::Result<u64> {
+        let n = solver.predict(window)?;
+        let header = session.header(window.step, window.time, window.dt);
+        let mut sent_checksum = 0;
+        self.raster_pub.publish(n, |hdr, out| {
+            solver.write_raster(window, out);
+            *hdr = header;
+            if checksums {
+                hdr.checksum = checksum_bytes(as_bytes(out));
+                sent_checksum = hdr.checksum;
+            }
+        })?;
+        Ok(sent_checksum)
+    }
+
+    /// Waits for the coupler's velocities and completes the step with them; returns the time
+    /// the solver took.
+    fn finish<S: Solver>(&mut self, session: &Session<'_, T>, window: &StepWindow, solver: &mut S) -> anyhow::Result<Duration> {
+        let mut finish_time = Duration::ZERO;
+        session.recv(&mut self.vel_sub, "the constrained velocities", |h, v| -> anyhow::Result<()> {
+            session.check_message(&names::VELOCITIES, h, window.step, v)?;
+            let t = Instant::now();
+            solver.finish(window, v)?;
+            finish_time = t.elapsed();
+            Ok(())
+        })??;
+        Ok(finish_time)
     }
 }
 

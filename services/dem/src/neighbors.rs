@@ -8,7 +8,7 @@
 
 use crate::contact::ContactState;
 use crate::space::{Space, Vector};
-use crate::state::{DemState, WallShape};
+use crate::state::{DemState, Grains, WallShape};
 use rayon::prelude::*;
 
 /// Contact histories keyed for lookup across a rebuild.
@@ -182,130 +182,20 @@ impl<S: Space> NeighborList<S> {
     /// Rebuilds the list for the current positions, carrying contact history over by ids.
     pub fn build(&mut self, state: &DemState<S>) {
         let g = &state.grains;
-        let n = g.len();
-        let skin = state.params.skin;
-        let (period, half) = periods(state);
-        let domain = &state.params.domain;
         let r_max = g.radius.iter().copied().fold(0.0, f64::max);
-        let cell = (2.0 * r_max + skin).max(1e-12);
+        let grid = CellGrid::new(state, (2.0 * r_max + state.params.skin).max(1e-12));
+        let cells: Vec<[usize; 3]> = g.x.par_iter().with_min_len(4096).map(|&x| grid.cell_of::<S>(x)).collect();
+        let (start, sorted) = grid.sort_by_cell(&cells);
+        let listed = list_pairs(state, &grid, &cells, &start, &sorted);
+        self.pairs = self.pairs_with_history(g, &listed);
+        (self.walls, self.wall_offsets) = self.list_walls(state);
+        self.record_build(state);
+    }
 
-        // Cell grid: periodic axes span the domain; open axes span the grains' bounding box.
-        let mut lo = [0.0; 3];
-        let mut dims = [1usize; 3];
-        let mut wrap = [false; 3];
-        for k in 0..S::DIM {
-            if domain.periodic[k] {
-                lo[k] = domain.min[k];
-                let cells = (domain.length(k) / cell).floor() as usize;
-                // Fewer than 3 cells would list a pair twice through the wrap: one cell then.
-                if cells >= 3 {
-                    dims[k] = cells;
-                    wrap[k] = true;
-                }
-            } else {
-                let (mn, mx) = g.x.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| {
-                    let c = S::component(x, k);
-                    (a.min(c), b.max(c))
-                });
-                lo[k] = if n > 0 { mn } else { 0.0 };
-                dims[k] = if n > 0 { ((mx - mn) / cell).floor() as usize + 1 } else { 1 };
-            }
-        }
-        let cell_len = [
-            if wrap[0] { domain.length(0) / dims[0] as f64 } else { cell },
-            if wrap[1] { domain.length(1) / dims[1] as f64 } else { cell },
-            if wrap[2] { domain.length(2) / dims[2] as f64 } else { cell },
-        ];
-        let cell_of = |x: S::V| -> [usize; 3] {
-            let a = S::to_array(x);
-            let mut c = [0usize; 3];
-            for k in 0..S::DIM {
-                let mut t = (a[k] - lo[k]) / cell_len[k];
-                if wrap[k] {
-                    t = t.rem_euclid(dims[k] as f64);
-                }
-                c[k] = (t.floor().max(0.0) as usize).min(dims[k] - 1);
-            }
-            c
-        };
-        let linear = |c: [usize; 3]| (c[2] * dims[1] + c[1]) * dims[0] + c[0];
-        let n_cells = dims[0] * dims[1] * dims[2];
-
-        // Counting sort of grains by cell.
-        let cells: Vec<[usize; 3]> = g.x.par_iter().with_min_len(4096).map(|&x| cell_of(x)).collect();
-        let mut start = vec![0u32; n_cells + 1];
-        for c in &cells {
-            start[linear(*c) + 1] += 1;
-        }
-        for k in 0..n_cells {
-            start[k + 1] += start[k];
-        }
-        let mut fill = start.clone();
-        let mut sorted = vec![0u32; n];
-        for (i, c) in cells.iter().enumerate() {
-            let l = linear(*c);
-            sorted[fill[l] as usize] = i as u32;
-            fill[l] += 1;
-        }
-
-        // Pairs (i < j) per chunk of grains, concatenated in grain order.
-        let stencil: Vec<[isize; 3]> = {
-            let r = |k: usize| if k < S::DIM { -1isize..=1 } else { 0..=0 };
-            let mut s = Vec::new();
-            for dz in r(2) {
-                for dy in r(1) {
-                    for dx in r(0) {
-                        s.push([dx, dy, dz]);
-                    }
-                }
-            }
-            s
-        };
-        const CHUNK: usize = 1024;
-        let chunks: Vec<Vec<(u32, u32)>> = (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|chunk| {
-                let mut out = Vec::new();
-                #[allow(clippy::needless_range_loop)] // i is also the pair's first index
-                for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
-                    let c = cells[i];
-                    let (xi, ri) = (g.x[i], g.radius[i]);
-                    let mut found: Vec<u32> = Vec::new();
-                    for d in &stencil {
-                        let mut nc = [0usize; 3];
-                        let mut ok = true;
-                        for k in 0..3 {
-                            let t = c[k] as isize + d[k];
-                            if wrap[k] {
-                                nc[k] = t.rem_euclid(dims[k] as isize) as usize;
-                            } else if t < 0 || t >= dims[k] as isize {
-                                ok = false;
-                            } else {
-                                nc[k] = t as usize;
-                            }
-                        }
-                        if !ok {
-                            continue;
-                        }
-                        let l = linear(nc);
-                        for &j in &sorted[start[l] as usize..start[l + 1] as usize] {
-                            if (j as usize) <= i || (g.frozen[i] && g.frozen[j as usize]) {
-                                continue;
-                            }
-                            let cut = ri + g.radius[j as usize] + skin;
-                            if separation::<S>(xi, g.x[j as usize], period, half).length_squared() < cut * cut {
-                                found.push(j);
-                            }
-                        }
-                    }
-                    found.sort_unstable();
-                    out.extend(found.into_iter().map(|j| (i as u32, j)));
-                }
-                out
-            })
-            .collect();
-
-        // Carry history: old pairs that hold something, looked up by (id, id).
+    /// The listed pairs with the history the previous list holds for them (looked up by the
+    /// pair's grain ids; the spring turned over when their order flipped).
+    fn pairs_with_history(&self, g: &Grains<S>, listed: &[(u32, u32)]) -> Vec<PairSlot<S>> {
+        // Old pairs that hold something, keyed by (id, id).
         let mut old: History<(u64, u64), S::V> = self
             .pairs
             .iter()
@@ -337,8 +227,7 @@ impl<S: Space> NeighborList<S> {
                 Err(_) => ContactState::default(),
             }
         };
-        let listed: Vec<(u32, u32)> = chunks.into_iter().flatten().collect();
-        self.pairs = listed
+        listed
             .par_iter()
             .with_min_len(4096)
             .map(|&(i, j)| PairSlot {
@@ -346,9 +235,15 @@ impl<S: Space> NeighborList<S> {
                 j,
                 state: lookup(g.id[i as usize], g.id[j as usize]),
             })
-            .collect();
+            .collect()
+    }
 
-        // Walls, by grain then wall index.
+    /// Grain–wall pairs closer than r + skin, by grain then wall index, with the history the
+    /// previous list holds for them (by grain id and wall index); and each grain's offsets.
+    fn list_walls(&self, state: &DemState<S>) -> (Vec<WallSlot<S>>, Vec<u32>) {
+        let g = &state.grains;
+        let n = g.len();
+        let skin = state.params.skin;
         let mut old_walls: History<(u64, u32), S::V> = self
             .walls
             .iter()
@@ -374,13 +269,174 @@ impl<S: Space> NeighborList<S> {
             }
             wall_offsets[i + 1] = walls.len() as u32;
         }
-        self.walls = walls;
-        self.wall_offsets = wall_offsets;
+        (walls, wall_offsets)
+    }
 
+    /// What the rebuild criteria and the next history carry compare with.
+    fn record_build(&mut self, state: &DemState<S>) {
+        let g = &state.grains;
         self.x_built = g.x.clone();
         self.wall_anchor_built = state.walls.iter().map(|w| wall_anchor(&w.shape)).collect();
-        self.skin = skin;
+        self.skin = state.params.skin;
         self.ids_built = g.id.clone();
         self.builds += 1;
     }
+}
+
+/// The cell grid of a build, cells at least `cell` wide: periodic axes span the domain (and
+/// wrap, given at least 3 cells), open axes span the grains' bounding box.
+struct CellGrid {
+    lo: [f64; 3],
+    dims: [usize; 3],
+    wrap: [bool; 3],
+    cell_len: [f64; 3],
+}
+
+impl CellGrid {
+    fn new<S: Space>(state: &DemState<S>, cell: f64) -> Self {
+        let g = &state.grains;
+        let n = g.len();
+        let domain = &state.params.domain;
+        let mut lo = [0.0; 3];
+        let mut dims = [1usize; 3];
+        let mut wrap = [false; 3];
+        for k in 0..S::DIM {
+            if domain.periodic[k] {
+                lo[k] = domain.min[k];
+                let cells = (domain.length(k) / cell).floor() as usize;
+                // Fewer than 3 cells would list a pair twice through the wrap: one cell then.
+                if cells >= 3 {
+                    dims[k] = cells;
+                    wrap[k] = true;
+                }
+            } else {
+                let (mn, mx) = g.x.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| {
+                    let c = S::component(x, k);
+                    (a.min(c), b.max(c))
+                });
+                lo[k] = if n > 0 { mn } else { 0.0 };
+                dims[k] = if n > 0 { ((mx - mn) / cell).floor() as usize + 1 } else { 1 };
+            }
+        }
+        let cell_len = [
+            if wrap[0] { domain.length(0) / dims[0] as f64 } else { cell },
+            if wrap[1] { domain.length(1) / dims[1] as f64 } else { cell },
+            if wrap[2] { domain.length(2) / dims[2] as f64 } else { cell },
+        ];
+        CellGrid { lo, dims, wrap, cell_len }
+    }
+
+    /// The cell of a position: wrapped on periodic axes, clamped onto the grid on open ones.
+    #[inline]
+    fn cell_of<S: Space>(&self, x: S::V) -> [usize; 3] {
+        let a = S::to_array(x);
+        let mut c = [0usize; 3];
+        for k in 0..S::DIM {
+            let mut t = (a[k] - self.lo[k]) / self.cell_len[k];
+            if self.wrap[k] {
+                t = t.rem_euclid(self.dims[k] as f64);
+            }
+            c[k] = (t.floor().max(0.0) as usize).min(self.dims[k] - 1);
+        }
+        c
+    }
+
+    #[inline]
+    fn linear(&self, c: [usize; 3]) -> usize {
+        (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]
+    }
+
+    /// The cell at offset `d` from cell `c`: wrapped on periodic axes, `None` off the grid.
+    #[inline]
+    fn offset(&self, c: [usize; 3], d: [isize; 3]) -> Option<[usize; 3]> {
+        let mut nc = [0usize; 3];
+        let mut ok = true;
+        for k in 0..3 {
+            let t = c[k] as isize + d[k];
+            if self.wrap[k] {
+                nc[k] = t.rem_euclid(self.dims[k] as isize) as usize;
+            } else if t < 0 || t >= self.dims[k] as isize {
+                ok = false;
+            } else {
+                nc[k] = t as usize;
+            }
+        }
+        ok.then_some(nc)
+    }
+
+    /// Counting sort of the grains (their `cells`) by cell: the grains of the cell with linear
+    /// index `l` are `sorted[start[l]..start[l + 1]]`, in index order.
+    fn sort_by_cell(&self, cells: &[[usize; 3]]) -> (Vec<u32>, Vec<u32>) {
+        let n_cells = self.dims[0] * self.dims[1] * self.dims[2];
+        let mut start = vec![0u32; n_cells + 1];
+        for c in cells {
+            start[self.linear(*c) + 1] += 1;
+        }
+        for k in 0..n_cells {
+            start[k + 1] += start[k];
+        }
+        let mut fill = start.clone();
+        let mut sorted = vec![0u32; cells.len()];
+        for (i, c) in cells.iter().enumerate() {
+            let l = self.linear(*c);
+            sorted[fill[l] as usize] = i as u32;
+            fill[l] += 1;
+        }
+        (start, sorted)
+    }
+}
+
+/// Offsets to the 3^d cells around a cell, itself included (x fastest).
+fn stencil<S: Space>() -> Vec<[isize; 3]> {
+    let r = |k: usize| if k < S::DIM { -1isize..=1 } else { 0..=0 };
+    let mut s = Vec::new();
+    for dz in r(2) {
+        for dy in r(1) {
+            for dx in r(0) {
+                s.push([dx, dy, dz]);
+            }
+        }
+    }
+    s
+}
+
+/// Grain pairs (i < j) closer than r_i + r_j + skin, two frozen grains excepted, searched in the
+/// stencil of each grain's cell (`cells`, sorted by [`CellGrid::sort_by_cell`]); per chunk of
+/// grains in parallel, concatenated in grain order, each grain's partners in index order.
+fn list_pairs<S: Space>(state: &DemState<S>, grid: &CellGrid, cells: &[[usize; 3]], start: &[u32], sorted: &[u32]) -> Vec<(u32, u32)> {
+    let g = &state.grains;
+    let n = g.len();
+    let skin = state.params.skin;
+    let (period, half) = periods(state);
+    let stencil = stencil::<S>();
+    const CHUNK: usize = 1024;
+    let chunks: Vec<Vec<(u32, u32)>> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|chunk| {
+            let mut out = Vec::new();
+            #[allow(clippy::needless_range_loop)] // i is also the pair's first index
+            for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
+                let c = cells[i];
+                let (xi, ri) = (g.x[i], g.radius[i]);
+                let mut found: Vec<u32> = Vec::new();
+                for d in &stencil {
+                    let Some(nc) = grid.offset(c, *d) else { continue };
+                    let l = grid.linear(nc);
+                    for &j in &sorted[start[l] as usize..start[l + 1] as usize] {
+                        if (j as usize) <= i || (g.frozen[i] && g.frozen[j as usize]) {
+                            continue;
+                        }
+                        let cut = ri + g.radius[j as usize] + skin;
+                        if separation::<S>(xi, g.x[j as usize], period, half).length_squared() < cut * cut {
+                            found.push(j);
+                        }
+                    }
+                }
+                found.sort_unstable();
+                out.extend(found.into_iter().map(|j| (i as u32, j)));
+            }
+            out
+        })
+        .collect();
+    chunks.into_iter().flatten().collect()
 }

@@ -154,168 +154,203 @@ pub struct Inputs<'a> {
     pub stress: &'a BTreeMap<u64, [[f64; 3]; 3]>,
 }
 
-/// One epoch. New ids count up from `next_grain_id` and `next_point_id`. Deterministic from
-/// `rng`.
+/// One epoch (Yue 2018 §4, Alg. 7–18): the cells' signed distance to the material's surface,
+/// their new zones, the items to delete, new points (homogenization) and grains (enrichment),
+/// and the factors that keep each cell's mass. New ids count up from `next_grain_id` and
+/// `next_point_id`. Deterministic from `rng`.
 pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_point_id): (u64, u64), rng: &mut Rng) -> Plan {
-    let Inputs {
-        nodes,
-        kernel,
-        cells,
-        previous,
-        solid,
-        clearance,
-        grains,
-        points,
-        stress,
-    } = *input;
-    let r_max = s.radius_mean + 2.0 * s.radius_std;
-    let clear = |x: [f64; 3]| clearance(x) >= r_max;
-    let dim = S::DIM;
-    let n = dims(cells, dim);
-    let count: usize = n.iter().product();
-    assert_eq!(previous.len(), count, "one previous zone per cell");
-    let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
-    for g in grains.iter().filter(|g| !g.fixed) {
-        if let Some(c) = cell_of(cells, dim, g.x) {
-            grain_mass[c] += g.mass;
-        }
-    }
-    for p in points {
-        if let Some(c) = cell_of(cells, dim, p.x) {
-            point_mass[c] += p.mass;
-        }
-    }
-    // Alg. 7 on the grains; cells with material points are dense by the paper's ansatz.
-    let disks: Vec<([f64; 3], f64)> = grains.iter().map(|g| (g.x, g.radius)).collect();
-    let mut field = packing_fraction(cells, dim, &disks, 4);
-    // Fixed grains are a wall: their cells are dense too.
-    let mut fixed = vec![false; count];
-    for g in grains.iter().filter(|g| g.fixed) {
-        if let Some(c) = cell_of(cells, dim, g.x) {
-            fixed[c] = true;
-        }
-    }
-    for (c, f) in field.iter_mut().enumerate() {
-        if point_mass[c] > 0.0 || fixed[c] || solid.get(c).copied().unwrap_or(false) {
-            *f = 1.0;
-        }
-    }
-    let distance = match s.layered {
-        Some(up) => column_depth(cells, dim, &field, s.critical_packing, up),
-        None => distance_to_level(cells, dim, &field, s.critical_packing),
+    let epoch = Epoch::new(input, s, S::DIM);
+    let disks: Vec<([f64; 3], f64)> = input.grains.iter().map(|g| (g.x, g.radius)).collect();
+    let distance = epoch.signed_distance(&disks);
+    let zones = epoch.zones(&distance);
+    let (delete_grains, delete_points) = epoch.deletions(&zones);
+    let new_points = epoch.homogenize::<S>(&zones, next_point_id, rng);
+    let new_grains = epoch.enrich(&zones, &disks, next_grain_id, rng);
+    let mut plan = Plan {
+        zones,
+        distance,
+        delete_grains,
+        delete_points,
+        new_grains,
+        new_points,
+        scale_points: Vec::new(),
+        unplaced: 0.0,
     };
-    // A cell "lacks" a model when that model holds under half of what the other holds.
-    let lacks_grains = |c: usize| point_mass[c] > 0.0 && grain_mass[c] < 0.5 * point_mass[c];
-    let lacks_points = |c: usize| grain_mass[c] > 0.0 && point_mass[c] < 0.5 * grain_mass[c];
-    let is_solid = |c: usize| solid.get(c).copied().unwrap_or(false);
-    // A cell behind a wall reads dense, so its own distance says nothing; the material that
-    // strays into it (points resting a little behind a floor or a silo bottom) takes the zone
-    // of the deepest open cell next to it. Cells with no open neighbour keep their zone.
-    let open_distance = |c: usize| -> Option<f64> {
-        if !is_solid(c) {
+    conserve_mass(input, S::DIM, s, &mut plan);
+    plan
+}
+
+/// What the steps of one epoch share: its inputs and settings, the shape of the cell grid, and
+/// the mass of each model in every cell before the epoch.
+struct Epoch<'a> {
+    input: &'a Inputs<'a>,
+    s: &'a Settings,
+    dim: usize,
+    /// Cells along each axis (1 beyond `dim`), and in all.
+    n: [usize; 3],
+    count: usize,
+    /// Full mass of the grains (fixed ones left out) and of the points in every cell [kg].
+    grain_mass: Vec<f64>,
+    point_mass: Vec<f64>,
+}
+
+impl<'a> Epoch<'a> {
+    fn new(input: &'a Inputs<'a>, s: &'a Settings, dim: usize) -> Self {
+        let cells = input.cells;
+        let n = dims(cells, dim);
+        let count: usize = n.iter().product();
+        assert_eq!(input.previous.len(), count, "one previous zone per cell");
+        let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
+        for g in input.grains.iter().filter(|g| !g.fixed) {
+            if let Some(c) = cell_of(cells, dim, g.x) {
+                grain_mass[c] += g.mass;
+            }
+        }
+        for p in input.points {
+            if let Some(c) = cell_of(cells, dim, p.x) {
+                point_mass[c] += p.mass;
+            }
+        }
+        Epoch {
+            input,
+            s,
+            dim,
+            n,
+            count,
+            grain_mass,
+            point_mass,
+        }
+    }
+
+    fn cell_of(&self, x: [f64; 3]) -> Option<usize> {
+        cell_of(self.input.cells, self.dim, x)
+    }
+
+    fn is_solid(&self, c: usize) -> bool {
+        self.input.solid.get(c).copied().unwrap_or(false)
+    }
+
+    /// A cell "lacks" a model when that model holds under half of what the other holds.
+    fn lacks_grains(&self, c: usize) -> bool {
+        self.point_mass[c] > 0.0 && self.grain_mass[c] < 0.5 * self.point_mass[c]
+    }
+
+    fn lacks_points(&self, c: usize) -> bool {
+        self.grain_mass[c] > 0.0 && self.point_mass[c] < 0.5 * self.grain_mass[c]
+    }
+
+    /// Alg. 7: the packing fraction of the grains (`disks`) per cell, and every cell centre's
+    /// signed distance to its isocontour at Φρ, positive inside (layered: the depth below the
+    /// top of its column, §4.3). Cells with material points are dense by the paper's ansatz;
+    /// fixed grains and walls are too.
+    fn signed_distance(&self, disks: &[([f64; 3], f64)]) -> Vec<f64> {
+        let (cells, dim, s) = (self.input.cells, self.dim, self.s);
+        let mut field = packing_fraction(cells, dim, disks, 4);
+        let mut fixed = vec![false; self.count];
+        for g in self.input.grains.iter().filter(|g| g.fixed) {
+            if let Some(c) = cell_of(cells, dim, g.x) {
+                fixed[c] = true;
+            }
+        }
+        for (c, f) in field.iter_mut().enumerate() {
+            if self.point_mass[c] > 0.0 || fixed[c] || self.is_solid(c) {
+                *f = 1.0;
+            }
+        }
+        match s.layered {
+            Some(up) => column_depth(cells, dim, &field, s.critical_packing, up),
+            None => distance_to_level(cells, dim, &field, s.critical_packing),
+        }
+    }
+
+    /// Alg. 8: the zone of every cell from its distance (φ0, r_h), except that no cell jumps
+    /// between continuum and discrete (§4.2) and none drops the only model its material is in:
+    /// those are made hybrid.
+    fn zones(&self, distance: &[f64]) -> Vec<Zone> {
+        let s = self.s;
+        (0..self.count)
+            .map(|c| {
+                match (
+                    self.input.previous[c],
+                    self.open_distance(distance, c).map(|d| zone_of_distance(d, s.centre, s.half_width)),
+                ) {
+                    (z, None) => z,
+                    (Zone::Continuum, Some(Zone::Discrete)) | (Zone::Discrete, Some(Zone::Continuum)) => Zone::Hybrid,
+                    (_, Some(Zone::Discrete)) if self.lacks_grains(c) => Zone::Hybrid,
+                    (_, Some(Zone::Continuum)) if self.lacks_points(c) => Zone::Hybrid,
+                    (_, Some(z)) => z,
+                }
+            })
+            .collect()
+    }
+
+    /// The distance cell `c` takes its zone from. A cell behind a wall reads dense, so its own
+    /// distance says nothing; the material that strays into it (points resting a little behind
+    /// a floor or a silo bottom) takes the zone of the deepest open cell next to it. `None` (the
+    /// cell keeps its zone) when it has no open neighbour.
+    fn open_distance(&self, distance: &[f64], c: usize) -> Option<f64> {
+        if !self.is_solid(c) {
             return Some(distance[c]);
         }
         let mut deepest: Option<f64> = None;
-        for q in ring(n, dim, c, 1).filter(|&q| !is_solid(q)) {
+        for q in ring(self.n, self.dim, c, 1).filter(|&q| !self.is_solid(q)) {
             deepest = Some(deepest.map_or(distance[q], |d| d.max(distance[q])));
         }
         deepest
-    };
-    let zones: Vec<Zone> = (0..count)
-        .map(
-            |c| match (previous[c], open_distance(c).map(|d| zone_of_distance(d, s.centre, s.half_width))) {
-                (z, None) => z,
-                (Zone::Continuum, Some(Zone::Discrete)) | (Zone::Discrete, Some(Zone::Continuum)) => Zone::Hybrid,
-                (_, Some(Zone::Discrete)) if lacks_grains(c) => Zone::Hybrid,
-                (_, Some(Zone::Continuum)) if lacks_points(c) => Zone::Hybrid,
-                (_, Some(z)) => z,
-            },
-        )
-        .collect();
-    let zone_at = |x: [f64; 3]| cell_of(cells, dim, x).map_or(Zone::Discrete, |c| zones[c]);
-    let delete_grains: Vec<u64> = grains
-        .iter()
-        .filter(|g| !g.fixed && zone_at(g.x) == Zone::Continuum)
-        .map(|g| g.id)
-        .collect();
-    let delete_points: Vec<u64> = points.iter().filter(|p| zone_at(p.x) == Zone::Discrete).map(|p| p.id).collect();
+    }
 
-    // Homogenization: the grains' velocity on the nodes (mass-weighted, the MPM's kernel).
-    let need_points: Vec<usize> = (0..count).filter(|&c| zones[c] == Zone::Hybrid && lacks_points(c)).collect();
-    let mut new_points = Vec::new();
-    if !need_points.is_empty() {
-        let mut node_mp: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
-        for g in grains.iter().filter(|g| !g.fixed) {
-            for_each_node::<S>(nodes, kernel, S::from_array(g.x), |node, w, _| {
-                if w > 0.0 {
-                    let e = node_mp.entry(node).or_default();
-                    e.0 += w * g.mass;
-                    for k in 0..3 {
-                        e.1[k] += w * g.mass * g.v[k];
-                    }
-                }
-            });
-        }
-        // Alg. 11 divides by h^d, right where the node's support is full of material; at a
-        // wall or the free surface part of it is empty. Divide instead by the part the grains
-        // fill (their volume under the weights over the material's packing), at most 4×.
-        let packing = s.bulk_density / s.grain_density;
-        let mut fill: BTreeMap<u64, f64> = BTreeMap::new();
-        for g in grains.iter().filter(|g| !g.fixed) {
-            for_each_node::<S>(nodes, kernel, S::from_array(g.x), |node, w, _| {
-                *fill.entry(node).or_default() += w * grain_volume(dim, g.radius) / nodes.h.powi(dim as i32);
-            });
-        }
-        let stress: BTreeMap<u64, [[f64; 3]; 3]> = stress
+    /// Alg. 17, 18: the grains in continuum cells (fixed ones kept) and the points in discrete
+    /// cells; off the grid counts as discrete.
+    fn deletions(&self, zones: &[Zone]) -> (Vec<u64>, Vec<u64>) {
+        let zone_at = |x: [f64; 3]| self.cell_of(x).map_or(Zone::Discrete, |c| zones[c]);
+        let delete_grains: Vec<u64> = self
+            .input
+            .grains
             .iter()
-            .map(|(&node, st)| {
-                let f = fill.get(&node).copied().unwrap_or(0.0);
-                let factor = if f > 0.0 { (packing / f).clamp(1.0, 4.0) } else { 1.0 };
-                (node, st.map(|row| row.map(|e| e * factor)))
-            })
+            .filter(|g| !g.fixed && zone_at(g.x) == Zone::Continuum)
+            .map(|g| g.id)
             .collect();
+        let delete_points: Vec<u64> = self
+            .input
+            .points
+            .iter()
+            .filter(|p| zone_at(p.x) == Zone::Discrete)
+            .map(|p| p.id)
+            .collect();
+        (delete_grains, delete_points)
+    }
+
+    /// Homogenization (§4.2, Alg. 11): new points in the hybrid cells that lack them, up to
+    /// the MPM's count per cell, with the mass of the cell's grains shared among them, and the
+    /// grains' velocity and stress interpolated from the nodes.
+    fn homogenize<S: Space>(&self, zones: &[Zone], next_point_id: u64, rng: &mut Rng) -> Vec<NewPoint> {
+        let (cells, dim, s) = (self.input.cells, self.dim, self.s);
+        let need_points: Vec<usize> = (0..self.count)
+            .filter(|&c| zones[c] == Zone::Hybrid && self.lacks_points(c))
+            .collect();
+        let mut new_points = Vec::new();
+        if need_points.is_empty() {
+            return new_points;
+        }
+        let node_mp = self.grain_momentum_on_nodes::<S>();
+        let stress = self.grain_stress_over_fill::<S>();
         let spacing = cells.h / s.points_per_axis.max(1) as f64;
         let per_cell = (s.points_per_axis.max(1) as usize).pow(dim as u32);
-        // A cell's points so far: new ones fill the places left, up to the MPM's count per
-        // cell (seeding a full cell on top of them multiplied the points of a turning drum
-        // threefold in 2 s, each lighter than the last).
-        let mut existing: BTreeMap<usize, Vec<[f64; 3]>> = BTreeMap::new();
-        for p in points {
-            if let Some(c) = cell_of(cells, dim, p.x).filter(|c| need_points.binary_search(c).is_ok()) {
-                existing.entry(c).or_default().push(p.x);
-            }
-        }
+        let existing = self.points_in(&need_points);
         for &c in &need_points {
-            let lo = cell_corner(cells, n, c);
+            let lo = cell_corner(cells, self.n, c);
             let there = existing.get(&c).map_or(&[][..], |v| &v[..]);
             if there.len() >= per_cell {
                 continue;
             }
+            let clearance = self.input.clearance;
             let xs = poisson_in_cell(dim, lo, cells.h, there, per_cell, 0.75 * spacing, &|x| clearance(x) > 0.0, rng);
             if xs.is_empty() {
                 continue;
             }
-            let mass = grain_mass[c] / xs.len() as f64;
+            let mass = self.grain_mass[c] / xs.len() as f64;
             for x in xs {
-                let (mut v, mut sigma, mut wv, mut ws) = ([0.0; 3], [[0.0; 3]; 3], 0.0, 0.0);
-                for_each_node::<S>(nodes, kernel, S::from_array(x), |node, w, _| {
-                    if let Some((m, p)) = node_mp.get(&node).filter(|(m, _)| *m > 0.0) {
-                        (0..3).for_each(|k| v[k] += w * p[k] / m);
-                        wv += w;
-                    }
-                    if let Some(st) = stress.get(&node) {
-                        for a in 0..3 {
-                            for b in 0..3 {
-                                sigma[a][b] += w * st[a][b];
-                            }
-                        }
-                        ws += w;
-                    }
-                });
-                // Renormalized over the nodes that have a value: a cell at the edge of the
-                // grains reads their values, not zeros from empty nodes.
-                let v = if wv > 0.0 { v.map(|c| c / wv) } else { v };
-                let stress = if ws > 0.0 { sigma.map(|row| row.map(|e| e / ws)) } else { sigma };
+                let (v, stress) = interpolate_grains::<S>(self.input.nodes, self.input.kernel, x, &node_mp, &stress);
                 new_points.push(NewPoint {
                     id: next_point_id + new_points.len() as u64,
                     x,
@@ -326,28 +361,119 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
                 });
             }
         }
+        new_points
     }
 
-    // Enrichment: grow grains into the hybrid cells that have points only.
-    let need_grains: BTreeSet<usize> = (0..count).filter(|&c| zones[c] == Zone::Hybrid && lacks_grains(c)).collect();
-    let mut new_grains = Vec::new();
-    if !need_grains.is_empty() {
+    /// The grains' mass and momentum on the nodes (the MPM's kernel), for their velocity there.
+    fn grain_momentum_on_nodes<S: Space>(&self) -> BTreeMap<u64, (f64, [f64; 3])> {
+        let mut node_mp: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
+        for g in self.input.grains.iter().filter(|g| !g.fixed) {
+            for_each_node::<S>(self.input.nodes, self.input.kernel, S::from_array(g.x), |node, w, _| {
+                if w > 0.0 {
+                    let e = node_mp.entry(node).or_default();
+                    e.0 += w * g.mass;
+                    for k in 0..3 {
+                        e.1[k] += w * g.mass * g.v[k];
+                    }
+                }
+            });
+        }
+        node_mp
+    }
+
+    /// The grains' stress per node (the input), rescaled to the part of the node's support the
+    /// grains fill. Alg. 11 divides by h^d, right where the node's support is full of material;
+    /// at a wall or the free surface part of it is empty. Divide instead by the part the grains
+    /// fill (their volume under the weights over the material's packing), at most 4×.
+    fn grain_stress_over_fill<S: Space>(&self) -> BTreeMap<u64, [[f64; 3]; 3]> {
+        let (nodes, dim, s) = (self.input.nodes, self.dim, self.s);
+        let packing = s.bulk_density / s.grain_density;
+        let mut fill: BTreeMap<u64, f64> = BTreeMap::new();
+        for g in self.input.grains.iter().filter(|g| !g.fixed) {
+            for_each_node::<S>(nodes, self.input.kernel, S::from_array(g.x), |node, w, _| {
+                *fill.entry(node).or_default() += w * grain_volume(dim, g.radius) / nodes.h.powi(dim as i32);
+            });
+        }
+        self.input
+            .stress
+            .iter()
+            .map(|(&node, st)| {
+                let f = fill.get(&node).copied().unwrap_or(0.0);
+                let factor = if f > 0.0 { (packing / f).clamp(1.0, 4.0) } else { 1.0 };
+                (node, st.map(|row| row.map(|e| e * factor)))
+            })
+            .collect()
+    }
+
+    /// The positions of the points so far in each of the cells `need_points` (sorted): new ones
+    /// fill the places left, up to the MPM's count per cell (seeding a full cell on top of them
+    /// multiplied the points of a turning drum threefold in 2 s, each lighter than the last).
+    fn points_in(&self, need_points: &[usize]) -> BTreeMap<usize, Vec<[f64; 3]>> {
+        let mut existing: BTreeMap<usize, Vec<[f64; 3]>> = BTreeMap::new();
+        for p in self.input.points {
+            if let Some(c) = self.cell_of(p.x).filter(|c| need_points.binary_search(c).is_ok()) {
+                existing.entry(c).or_default().push(p.x);
+            }
+        }
+        existing
+    }
+
+    /// Enrichment (§4.2, Alg. 10): new grains grown into the hybrid cells that lack them, at
+    /// most the mass of the cell's points, moving as the grains and points around them.
+    fn enrich(&self, zones: &[Zone], disks: &[([f64; 3], f64)], next_grain_id: u64, rng: &mut Rng) -> Vec<NewGrain> {
+        let need_grains: BTreeSet<usize> = (0..self.count)
+            .filter(|&c| zones[c] == Zone::Hybrid && self.lacks_grains(c))
+            .collect();
+        let mut new_grains = Vec::new();
+        if need_grains.is_empty() {
+            return new_grains;
+        }
+        let mut placed = self.grow_grains(&need_grains, disks, rng);
+        self.keep_within_point_mass(&mut placed);
+        let sources: Vec<([f64; 3], [f64; 3])> = self
+            .input
+            .grains
+            .iter()
+            .filter(|g| !g.fixed)
+            .map(|g| (g.x, g.v))
+            .chain(self.input.points.iter().map(|p| (p.x, p.v)))
+            .collect();
+        for (x, radius) in placed {
+            let v = enrichment::neighbour_velocity(x, self.s.radius_mean, sources.iter().copied()).unwrap_or([0.0; 3]);
+            new_grains.push(NewGrain {
+                id: next_grain_id + new_grains.len() as u64,
+                x,
+                radius,
+                v,
+            });
+        }
+        new_grains
+    }
+
+    /// Grains (centre, radius) placed in the cells `need_grains`, clear of the walls by their
+    /// largest radius. The front grows from the grains at the region's edge ([`enrichment::fill`]);
+    /// a cell that no grain reaches (points that flowed away from the grains) is filled on its
+    /// own, from a random seed.
+    fn grow_grains(&self, need_grains: &BTreeSet<usize>, disks: &[([f64; 3], f64)], rng: &mut Rng) -> Vec<([f64; 3], f64)> {
+        let (cells, dim, s) = (self.input.cells, self.dim, self.s);
+        let r_max = s.radius_mean + 2.0 * s.radius_std;
+        let clearance = self.input.clearance;
+        let clear = |x: [f64; 3]| clearance(x) >= r_max;
         let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for &c in &need_grains {
-            let lo = cell_corner(cells, n, c);
+        for &c in need_grains {
+            let lo = cell_corner(cells, self.n, c);
             for k in 0..3 {
                 min[k] = min[k].min(lo[k]);
                 max[k] = max[k].max(if k < dim { lo[k] + cells.h } else { lo[k] });
             }
         }
         let inside = |x: [f64; 3]| clear(x) && cell_of(cells, dim, x).is_some_and(|c| need_grains.contains(&c));
-        let mut placed = enrichment::fill(dim, min, max, inside, &disks, s.radius_mean, s.radius_std, s.attempts, rng);
-        // The front grows from the grains at the region's edge; a cell that no grain reaches
-        // (points that flowed away from the grains) is filled on its own, from a random seed.
+        let mut placed = enrichment::fill(dim, min, max, inside, disks, s.radius_mean, s.radius_std, s.attempts, rng);
         let mut reached: BTreeSet<usize> = placed.iter().filter_map(|(x, _)| cell_of(cells, dim, *x)).collect();
-        reached.extend(grains.iter().filter(|g| !g.fixed).filter_map(|g| cell_of(cells, dim, g.x)));
+        let grains = self.input.grains.iter().filter(|g| !g.fixed);
+        reached.extend(grains.filter_map(|g| cell_of(cells, dim, g.x)));
         for &c in need_grains.iter().filter(|c| !reached.contains(c)) {
-            let lo = cell_corner(cells, n, c);
+            let lo = cell_corner(cells, self.n, c);
             let hi = [0, 1, 2].map(|k| if k < dim { lo[k] + cells.h } else { lo[k] });
             let around: Vec<([f64; 3], f64)> = disks.iter().chain(&placed).copied().collect();
             let more = enrichment::fill(
@@ -363,56 +489,53 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
             );
             placed.extend(more);
         }
-        // A cell's new grains stop once they hold its points' mass (the material they stand
-        // for): more would outweigh what the points can give up (their factor is bounded) and
-        // the cell would gain mass. In the order placed, so the front's side stays filled.
-        let mut held = vec![0.0; count];
+        placed
+    }
+
+    /// A cell's new grains stop once they hold its points' mass (the material they stand
+    /// for): more would outweigh what the points can give up (their factor is bounded) and
+    /// the cell would gain mass. In the order placed, so the front's side stays filled.
+    fn keep_within_point_mass(&self, placed: &mut Vec<([f64; 3], f64)>) {
+        let mut held = vec![0.0; self.count];
         placed.retain(|&(x, r)| {
-            let Some(c) = cell_of(cells, dim, x) else { return false };
-            let keep = held[c] < point_mass[c];
+            let Some(c) = self.cell_of(x) else { return false };
+            let keep = held[c] < self.point_mass[c];
             if keep {
-                held[c] += s.grain_density * grain_volume(dim, r);
+                held[c] += self.s.grain_density * grain_volume(self.dim, r);
             }
             keep
         });
-        let sources: Vec<([f64; 3], [f64; 3])> = grains
-            .iter()
-            .filter(|g| !g.fixed)
-            .map(|g| (g.x, g.v))
-            .chain(points.iter().map(|p| (p.x, p.v)))
-            .collect();
-        for (x, radius) in placed {
-            let v = enrichment::neighbour_velocity(x, s.radius_mean, sources.iter().copied()).unwrap_or([0.0; 3]);
-            new_grains.push(NewGrain {
-                id: next_grain_id + new_grains.len() as u64,
-                x,
-                radius,
-                v,
-            });
+    }
+}
+
+/// Interpolates the grains' velocity (from their mass and momentum per node) and stress per
+/// node to `x` with the MPM's kernel, each renormalized over the nodes that have a value: a
+/// point at the edge of the grains reads their values, not zeros from empty nodes.
+fn interpolate_grains<S: Space>(
+    nodes: &Grid,
+    kernel: Kernel,
+    x: [f64; 3],
+    node_mp: &BTreeMap<u64, (f64, [f64; 3])>,
+    stress: &BTreeMap<u64, [[f64; 3]; 3]>,
+) -> ([f64; 3], [[f64; 3]; 3]) {
+    let (mut v, mut sigma, mut wv, mut ws) = ([0.0; 3], [[0.0; 3]; 3], 0.0, 0.0);
+    for_each_node::<S>(nodes, kernel, S::from_array(x), |node, w, _| {
+        if let Some((m, p)) = node_mp.get(&node).filter(|(m, _)| *m > 0.0) {
+            (0..3).for_each(|k| v[k] += w * p[k] / m);
+            wv += w;
         }
-    }
-    let (scale_points, unplaced) = conserve_mass(
-        cells,
-        dim,
-        &zones,
-        grains,
-        points,
-        &delete_grains,
-        &delete_points,
-        &new_grains,
-        &mut new_points,
-        s,
-    );
-    Plan {
-        zones,
-        distance,
-        delete_grains,
-        delete_points,
-        new_grains,
-        new_points,
-        scale_points,
-        unplaced,
-    }
+        if let Some(st) = stress.get(&node) {
+            for a in 0..3 {
+                for b in 0..3 {
+                    sigma[a][b] += w * st[a][b];
+                }
+            }
+            ws += w;
+        }
+    });
+    let v = if wv > 0.0 { v.map(|c| c / wv) } else { v };
+    let stress = if ws > 0.0 { sigma.map(|row| row.map(|e| e / ws)) } else { sigma };
+    (v, stress)
 }
 
 /// Per cell whose models changed (zone, deletions, new items), the factor on its points'
@@ -423,111 +546,23 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
 /// goes to the nearest cells with points, whose factors stay within [1/2, 2] too; what is
 /// left after that is spread over all the points (bounded to ±10%; beyond, it is lost and
 /// shows in the epoch's mass before and after). New points take their cell's factor
-/// directly; the existing ones are listed.
-#[allow(clippy::too_many_arguments)]
-fn conserve_mass(
-    cells: &Grid,
-    dim: usize,
-    zones: &[Zone],
-    grains: &[Grain],
-    points: &[Point],
-    delete_grains: &[u64],
-    delete_points: &[u64],
-    new_grains: &[NewGrain],
-    new_points: &mut [NewPoint],
-    s: &Settings,
-) -> (Vec<(u64, f64)>, f64) {
-    let count = zones.len();
-    let gone_g: BTreeSet<u64> = delete_grains.iter().copied().collect();
-    let gone_p: BTreeSet<u64> = delete_points.iter().copied().collect();
-    let grain_share = |z: Zone| if z == Zone::Hybrid { 1.0 - s.weight } else { 1.0 };
-    let point_share = |z: Zone| if z == Zone::Hybrid { s.weight } else { 1.0 };
-    let (mut before, mut after_g, mut after_p) = (vec![0.0; count], vec![0.0; count], vec![0.0; count]);
-    let mut changed = vec![false; count];
-    for g in grains.iter().filter(|g| !g.fixed) {
-        let Some(c) = cell_of(cells, dim, g.x) else { continue };
-        before[c] += g.share * g.mass;
-        if gone_g.contains(&g.id) {
-            changed[c] = true;
-        } else {
-            after_g[c] += grain_share(zones[c]) * g.mass;
-        }
-    }
-    let mass_of = |r: f64| s.grain_density * grain_volume(dim, r);
-    for g in new_grains {
-        if let Some(c) = cell_of(cells, dim, g.x) {
-            after_g[c] += grain_share(zones[c]) * mass_of(g.radius);
-            changed[c] = true;
-        }
-    }
-    for p in points {
-        let Some(c) = cell_of(cells, dim, p.x) else { continue };
-        before[c] += p.share * p.mass;
-        if gone_p.contains(&p.id) {
-            changed[c] = true;
-        } else {
-            after_p[c] += point_share(zones[c]) * p.mass;
-        }
-    }
-    for p in new_points.iter() {
-        if let Some(c) = cell_of(cells, dim, p.x) {
-            after_p[c] += point_share(zones[c]) * p.mass;
-            changed[c] = true;
-        }
-    }
-    let mut factor: Vec<f64> = (0..count)
-        .map(|c| {
-            let moved = changed[c] || (after_g[c] + after_p[c] - before[c]).abs() > 1e-12 * before[c];
-            if !moved || after_p[c] <= 0.0 {
-                return 1.0;
-            }
-            ((before[c] - after_g[c]) / after_p[c]).clamp(0.5, 2.0)
-        })
-        .collect();
-    // What a cell cannot keep (a cell turning discrete: its grains carry what they carry;
-    // a factor at its bound) goes to the points of the nearest cells that have points, within
-    // three cells, in proportion to their mass: the total stays, the mass moves a cell or two.
-    let n = dims(cells, dim);
-    let residual: Vec<f64> = (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).collect();
-    for c in (0..count).filter(|&c| residual[c].abs() > 1e-12 * before[c].max(f64::MIN_POSITIVE)) {
-        for r in 1..=3 {
-            let near: Vec<usize> = ring(n, dim, c, r).filter(|&q| after_p[q] > 0.0).collect();
-            let total: f64 = near.iter().map(|&q| factor[q] * after_p[q]).sum();
-            if total > 0.0 {
-                // No point more than doubles or halves: a sliver of points next to a cell
-                // that turned discrete must not take a whole cell's mass (it would fly off).
-                let share = (residual[c] / total).clamp(-0.5, 1.0);
-                for &q in &near {
-                    factor[q] = (factor[q] * (1.0 + share)).clamp(0.5, 2.0);
-                }
-                break;
-            }
-        }
-    }
-    // What is still unplaced (a cell turning discrete with no points within three cells, a
-    // factor at its bound: the gains of many epochs added up to +1.4% of a turning drum's
-    // mass in 2 s) goes to all the points in proportion to their mass, a uniform change of
-    // order 1e-5 per epoch, so that the total stays to round-off. Beyond ±10% of the points'
-    // mass something else is wrong: the rest is reported, not hidden.
-    let left = |factor: &[f64]| -> f64 { (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).sum() };
-    let held: f64 = (0..count).map(|c| factor[c] * after_p[c]).sum();
-    let unplaced = left(&factor);
-    if held > 0.0 && unplaced.abs() > 1e-12 * held {
-        let all = (1.0 + unplaced / held).clamp(0.9, 1.1);
-        factor
-            .iter_mut()
-            .zip(&after_p)
-            .filter(|(_, p)| **p > 0.0)
-            .for_each(|(f, _)| *f *= all);
-    }
-    let unplaced = left(&factor);
-    for p in new_points.iter_mut() {
+/// directly; the existing ones are listed in `plan.scale_points`, what is lost in
+/// `plan.unplaced`.
+fn conserve_mass(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &mut Plan) {
+    let cells = input.cells;
+    let gone_p: BTreeSet<u64> = plan.delete_points.iter().copied().collect();
+    let ledger = Ledger::of(input, dim, s, plan, &gone_p);
+    let mut factor = ledger.cell_factors();
+    ledger.spread_to_neighbours(&mut factor, dims(cells, dim), dim);
+    plan.unplaced = ledger.spread_to_all(&mut factor);
+    for p in plan.new_points.iter_mut() {
         if let Some(c) = cell_of(cells, dim, p.x) {
             p.mass *= factor[c];
             p.volume *= factor[c];
         }
     }
-    let scale = points
+    plan.scale_points = input
+        .points
         .iter()
         .filter(|p| !gone_p.contains(&p.id))
         .filter_map(|p| {
@@ -535,7 +570,138 @@ fn conserve_mass(
             (f != 1.0).then_some((p.id, f))
         })
         .collect();
-    (scale, unplaced)
+}
+
+/// An epoch's mass per cell as the solvers weigh it (grains 1 − w, points w in hybrid cells).
+struct Ledger {
+    /// Before the epoch, both models [kg].
+    before: Vec<f64>,
+    /// After it, the grains kept and new, and the points kept and new (before any factor).
+    after_g: Vec<f64>,
+    after_p: Vec<f64>,
+    /// Cells that lost or gained an item.
+    changed: Vec<bool>,
+}
+
+impl Ledger {
+    /// The ledger of `plan` over the grains and points of `input` (`gone_p`: the ids of the
+    /// points it deletes).
+    fn of(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &Plan, gone_p: &BTreeSet<u64>) -> Ledger {
+        let (cells, zones) = (input.cells, &plan.zones);
+        let count = zones.len();
+        let gone_g: BTreeSet<u64> = plan.delete_grains.iter().copied().collect();
+        let grain_share = |z: Zone| if z == Zone::Hybrid { 1.0 - s.weight } else { 1.0 };
+        let point_share = |z: Zone| if z == Zone::Hybrid { s.weight } else { 1.0 };
+        let (mut before, mut after_g, mut after_p) = (vec![0.0; count], vec![0.0; count], vec![0.0; count]);
+        let mut changed = vec![false; count];
+        for g in input.grains.iter().filter(|g| !g.fixed) {
+            let Some(c) = cell_of(cells, dim, g.x) else { continue };
+            before[c] += g.share * g.mass;
+            if gone_g.contains(&g.id) {
+                changed[c] = true;
+            } else {
+                after_g[c] += grain_share(zones[c]) * g.mass;
+            }
+        }
+        let mass_of = |r: f64| s.grain_density * grain_volume(dim, r);
+        for g in &plan.new_grains {
+            if let Some(c) = cell_of(cells, dim, g.x) {
+                after_g[c] += grain_share(zones[c]) * mass_of(g.radius);
+                changed[c] = true;
+            }
+        }
+        for p in input.points {
+            let Some(c) = cell_of(cells, dim, p.x) else { continue };
+            before[c] += p.share * p.mass;
+            if gone_p.contains(&p.id) {
+                changed[c] = true;
+            } else {
+                after_p[c] += point_share(zones[c]) * p.mass;
+            }
+        }
+        for p in &plan.new_points {
+            if let Some(c) = cell_of(cells, dim, p.x) {
+                after_p[c] += point_share(zones[c]) * p.mass;
+                changed[c] = true;
+            }
+        }
+        Ledger {
+            before,
+            after_g,
+            after_p,
+            changed,
+        }
+    }
+
+    /// Each cell's own factor on its points, within [1/2, 2]; 1 where nothing moved or no
+    /// points remain.
+    fn cell_factors(&self) -> Vec<f64> {
+        let Ledger {
+            before,
+            after_g,
+            after_p,
+            changed,
+        } = self;
+        (0..before.len())
+            .map(|c| {
+                let moved = changed[c] || (after_g[c] + after_p[c] - before[c]).abs() > 1e-12 * before[c];
+                if !moved || after_p[c] <= 0.0 {
+                    return 1.0;
+                }
+                ((before[c] - after_g[c]) / after_p[c]).clamp(0.5, 2.0)
+            })
+            .collect()
+    }
+
+    /// What a cell cannot keep (a cell turning discrete: its grains carry what they carry;
+    /// a factor at its bound) goes to the points of the nearest cells that have points, within
+    /// three cells, in proportion to their mass: the total stays, the mass moves a cell or two.
+    fn spread_to_neighbours(&self, factor: &mut [f64], n: [usize; 3], dim: usize) {
+        let Ledger {
+            before, after_g, after_p, ..
+        } = self;
+        let count = before.len();
+        let residual: Vec<f64> = (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).collect();
+        for c in (0..count).filter(|&c| residual[c].abs() > 1e-12 * before[c].max(f64::MIN_POSITIVE)) {
+            for r in 1..=3 {
+                let near: Vec<usize> = ring(n, dim, c, r).filter(|&q| after_p[q] > 0.0).collect();
+                let total: f64 = near.iter().map(|&q| factor[q] * after_p[q]).sum();
+                if total > 0.0 {
+                    // No point more than doubles or halves: a sliver of points next to a cell
+                    // that turned discrete must not take a whole cell's mass (it would fly off).
+                    let share = (residual[c] / total).clamp(-0.5, 1.0);
+                    for &q in &near {
+                        factor[q] = (factor[q] * (1.0 + share)).clamp(0.5, 2.0);
+                    }
+                    break;
+                }
+            }
+        }
+    }
+
+    /// What is still unplaced (a cell turning discrete with no points within three cells, a
+    /// factor at its bound: the gains of many epochs added up to +1.4% of a turning drum's
+    /// mass in 2 s) goes to all the points in proportion to their mass, a uniform change of
+    /// order 1e-5 per epoch, so that the total stays to round-off. Beyond ±10% of the points'
+    /// mass something else is wrong: the rest is returned (reported), not hidden.
+    fn spread_to_all(&self, factor: &mut [f64]) -> f64 {
+        let Ledger {
+            before, after_g, after_p, ..
+        } = self;
+        let count = before.len();
+        let left = |factor: &[f64]| -> f64 { (0..count).map(|c| before[c] - after_g[c] - factor[c] * after_p[c]).sum() };
+        let held: f64 = (0..count).map(|c| factor[c] * after_p[c]).sum();
+        let unplaced = left(factor);
+        if held > 0.0 && unplaced.abs() > 1e-12 * held {
+            let all = (1.0 + unplaced / held).clamp(0.9, 1.1);
+            factor
+                .iter_mut()
+                .zip(after_p)
+                .filter(|(_, p)| **p > 0.0)
+                .for_each(|(f, _)| *f *= all);
+        }
+        left(factor)
+    }
 }
 
 /// The cells at Chebyshev distance `r` (in cells) from cell `c`, on the grid.

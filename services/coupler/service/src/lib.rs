@@ -9,42 +9,94 @@ use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
+use grains_service::session::Session;
 use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary, set_component};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
+/// Runs the coupler to the end of the run: the macro-steps above, then the stop.
 pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     let mut session = join(transport, Role::Coupler, scene, opts)?;
-    let mut clock = RunClock::open(&session)?;
-    let mut command_pub = session.publisher::<Control, StepHeader>(&names::COMMAND, 1)?;
-    let mut dem_sub = session.subscriber::<RasterNode, StepHeader>(&names::DEM_RASTER)?;
-    let mut mpm_sub = session.subscriber::<RasterNode, StepHeader>(&names::MPM_RASTER)?;
-    let mut step_pub = session.publisher::<StepBegin, StepHeader>(&names::STEP_BEGIN, 1)?;
-    let mut vel_pub = session.publisher::<NodeVelocity, StepHeader>(&names::VELOCITIES, 1024)?;
-    let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+    let mut ports = Ports::<T>::open(&session)?;
     // The solvers, and the oracle when the run has one, follow the steps.
     let step_subscribers = 2 + usize::from(scene.participants().contains(&Role::Oracle));
     session.wait_until("the DEM, the MPM, the oracle and the launcher", |_| {
-        clock.connected()
-            && dem_sub.publisher_count() >= 1
-            && mpm_sub.publisher_count() >= 1
-            && step_pub.subscriber_count() >= step_subscribers
-            && command_pub.subscriber_count() >= 2
-            && vel_pub.subscriber_count() >= 2
-            && summary_pub.subscriber_count() >= 1
+        ports.connected(step_subscribers)
     })?;
     session.ready()?;
 
     let mut last = 0;
     for step in 1..=scene.steps {
         grains_service::telemetry::set_step(Some(step));
-        // Snapshot and set act on the solvers' state: checked here, carried out by both
-        // solvers before the next step.
+        if !ports.obey(&session, scene, step)? {
+            break;
+        }
+        let window = StepWindow::of(scene, step);
+        let header = session.header(step, window.time, window.dt);
+        ports.begin_step(header, &window, opts.checksums)?;
+        let wait_start = Instant::now();
+        let (report, compute) = ports.couple(&session, step, header, opts.checksums)?;
+        let wait = wait_start.elapsed() - compute;
+        publish_summary(&session, &mut ports.summary_pub, &window, &report, compute, wait)?;
+        last = step;
+    }
+    ports.stop(&session, scene, last)
+}
+
+/// The coupler's ports. (Fields in the reverse of the order they are opened in: they close
+/// in the order they did as the loop's locals, the control service last.)
+struct Ports<T: Transport> {
+    summary_pub: T::Publisher<Summary, StepHeader>,
+    vel_pub: T::Publisher<NodeVelocity, StepHeader>,
+    step_pub: T::Publisher<StepBegin, StepHeader>,
+    mpm_sub: T::Subscriber<RasterNode, StepHeader>,
+    dem_sub: T::Subscriber<RasterNode, StepHeader>,
+    /// Commands forwarded to the solvers.
+    command_pub: T::Publisher<Control, StepHeader>,
+    clock: RunClock<T>,
+}
+
+impl<T: Transport> Ports<T> {
+    fn open(session: &Session<'_, T>) -> anyhow::Result<Self> {
+        let clock = RunClock::open(session)?;
+        let command_pub = session.publisher::<Control, StepHeader>(&names::COMMAND, 1)?;
+        let dem_sub = session.subscriber::<RasterNode, StepHeader>(&names::DEM_RASTER)?;
+        let mpm_sub = session.subscriber::<RasterNode, StepHeader>(&names::MPM_RASTER)?;
+        let step_pub = session.publisher::<StepBegin, StepHeader>(&names::STEP_BEGIN, 1)?;
+        let vel_pub = session.publisher::<NodeVelocity, StepHeader>(&names::VELOCITIES, 1024)?;
+        let summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
+        Ok(Ports {
+            summary_pub,
+            vel_pub,
+            step_pub,
+            mpm_sub,
+            dem_sub,
+            command_pub,
+            clock,
+        })
+    }
+
+    /// The launcher, both solvers and `step_subscribers` followers of the steps are connected.
+    fn connected(&mut self, step_subscribers: usize) -> bool {
+        self.clock.connected()
+            && self.dem_sub.publisher_count() >= 1
+            && self.mpm_sub.publisher_count() >= 1
+            && self.step_pub.subscriber_count() >= step_subscribers
+            && self.command_pub.subscriber_count() >= 2
+            && self.vel_pub.subscriber_count() >= 2
+            && self.summary_pub.subscriber_count() >= 1
+    }
+
+    /// The control commands before `step`, acknowledged at step − 1. Snapshot and set act on
+    /// the solvers' state: checked here ([`accepts`]), carried out by both solvers before the
+    /// next step. Returns `false` when the run must stop.
+    fn obey(&mut self, session: &Session<'_, T>, scene: &Scene, step: u64) -> anyhow::Result<bool> {
+        let command_pub = &mut self.command_pub;
         let mut forward = Ok(());
         // The solvers read forwarded commands only at the next step begin: never more than
         // the service holds, or the coupler would wait for them while they wait for it.
         let mut forwarded = 0;
-        let go_on = clock.obey(&session, step - 1, |c| {
+        let go_on = self.clock.obey(session, step - 1, |c| {
             if !accepts(scene, c) {
                 return AckStatus::Unsupported;
             }
@@ -63,27 +115,40 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
             AckStatus::Applied
         })?;
         forward?;
-        if !go_on {
-            break;
-        }
-        let window = StepWindow::of(scene, step);
-        let header = session.header(step, window.time, window.dt);
-        step_pub.publish(1, |h, out| {
+        Ok(go_on)
+    }
+
+    /// The step begin of `window`, with its DEM substeps.
+    fn begin_step(&mut self, header: StepHeader, window: &StepWindow, checksums: bool) -> anyhow::Result<()> {
+        self.step_pub.publish(1, |h, out| {
             *h = header;
             out[0] = StepBegin {
                 flags: 0,
                 substeps: window.substeps,
             };
-            if opts.checksums {
+            if checksums {
                 h.checksum = checksum_bytes(as_bytes(out));
             }
         })?;
+        Ok(())
+    }
 
-        let wait_start = Instant::now();
-        let mut compute = std::time::Duration::ZERO;
+    /// Receives the DEM and the MPM raster of `step` (checked: run, step, version, checksum,
+    /// order), constrains the shared nodes in place into the loaned velocity message
+    /// ([`grains_coupler::constrain`]) and publishes it. Returns the step's report and the
+    /// time the solve took.
+    fn couple(
+        &mut self,
+        session: &Session<'_, T>,
+        step: u64,
+        header: StepHeader,
+        checksums: bool,
+    ) -> anyhow::Result<(SolverReport, Duration)> {
+        let (mpm_sub, vel_pub) = (&mut self.mpm_sub, &mut self.vel_pub);
+        let mut compute = Duration::ZERO;
         let mut report = SolverReport::default();
-        session.recv(&mut dem_sub, "the DEM raster", |dh, dem| -> anyhow::Result<()> {
-            session.recv(&mut mpm_sub, "the MPM raster", |mh, mpm| -> anyhow::Result<()> {
+        session.recv(&mut self.dem_sub, "the DEM raster", |dh, dem| -> anyhow::Result<()> {
+            session.recv(mpm_sub, "the MPM raster", |mh, mpm| -> anyhow::Result<()> {
                 let t = Instant::now();
                 session.check_message(&names::DEM_RASTER, dh, step, dem)?;
                 session.check_message(&names::MPM_RASTER, mh, step, mpm)?;
@@ -99,7 +164,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
                 vel_pub.publish(n, |h, out| {
                     let r = grains_coupler::constrain(dem, mpm, out);
                     *h = header;
-                    if opts.checksums {
+                    if checksums {
                         h.checksum = checksum_bytes(as_bytes(out));
                     }
                     report = SolverReport {
@@ -115,19 +180,21 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
                 Ok(())
             })?
         })??;
-        let wait = wait_start.elapsed() - compute;
-        publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
-        last = step;
+        Ok((report, compute))
     }
-    let header = session.header(last + 1, last as f64 * scene.dt, scene.dt);
-    step_pub.publish(1, |h, out| {
-        *h = header;
-        out[0] = StepBegin {
-            flags: STEP_STOP,
-            substeps: 0,
-        };
-    })?;
-    Ok(())
+
+    /// After the last step taken (`last`) or a stop command: the step begin with the stop flag.
+    fn stop(&mut self, session: &Session<'_, T>, scene: &Scene, last: u64) -> anyhow::Result<()> {
+        let header = session.header(last + 1, last as f64 * scene.dt, scene.dt);
+        self.step_pub.publish(1, |h, out| {
+            *h = header;
+            out[0] = StepBegin {
+                flags: STEP_STOP,
+                substeps: 0,
+            };
+        })?;
+        Ok(())
+    }
 }
 
 /// Whether both solvers of this run can carry out a `snapshot` or `set` command (both have

@@ -6,7 +6,7 @@ use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
 use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
 use grains_grid::rng::{Rng, radius};
-use grains_protocol::scene::{DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
+use grains_protocol::scene::{Body, DemDamping, DemMaterial, Model, Scene, Shape, WallShape};
 use grains_protocol::wire::Zone;
 use grains_service::zones::ZoneField;
 
@@ -68,10 +68,43 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
 }
 
 /// Builds the DEM state of a scene: grains of every `dem` body on a jittered lattice (a
-/// loose packing that gravity settles), walls, domain; in `hybrid` bodies only the grains of
-/// the discrete and hybrid cells of `zones`. Deterministic from the scene's seed.
+/// loose packing that gravity settles) or from its packing file, walls, domain; in `hybrid`
+/// bodies only the grains of the discrete and hybrid cells of `zones`. Deterministic from the
+/// scene's seed.
 pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result<DemState<S>> {
-    let dim = scene.dim();
+    let (params, material_index) = dem_params::<S>(scene);
+    let mut state = DemState::<S> {
+        grains: Grains::default(),
+        walls: Vec::new(),
+        params,
+        time: 0.0,
+    };
+    let mut rng = Rng::new(scene.seed);
+    // Per grain: whether it comes from a packing file.
+    let mut from_packing = Vec::new();
+    for body in scene.bodies.iter().filter(|b| matches!(b.model, Model::Dem | Model::Hybrid)) {
+        let mat = &scene.materials[body.material];
+        let Some(dem) = &mat.dem else { continue };
+        let body_grains = BodyGrains {
+            scene,
+            zones,
+            body,
+            density: mat.density,
+            material: material_index[body.material],
+        };
+        match &body.packing {
+            Some(path) => body_grains.add_packed(&mut state, path, &mut from_packing)?,
+            None => body_grains.add_lattice(&mut state, dem, &mut rng, &mut from_packing),
+        }
+    }
+    add_walls(&mut state, scene);
+    drop_grains_cut_by_walls(&mut state, &from_packing);
+    Ok(state)
+}
+
+/// The DEM parameters of a scene (the contact laws of its DEM materials, gravity, domain,
+/// skin), and each scene material's index among those laws (`u32::MAX`: none).
+fn dem_params<S: Space>(scene: &Scene) -> (DemParams<S>, Vec<u32>) {
     let mut materials = Vec::new();
     let mut material_index = vec![u32::MAX; scene.materials.len()];
     for (k, m) in scene.materials.iter().enumerate() {
@@ -86,38 +119,78 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
         .filter_map(|m| m.dem.as_ref())
         .map(|d| 2.0 * d.radius)
         .fold(0.0, f64::max);
-    let mut state = DemState::<S> {
-        grains: Grains::default(),
-        walls: Vec::new(),
-        params: DemParams {
-            materials,
-            gravity: S::from_array(scene.gravity),
-            domain: Domain {
-                min: scene.domain.min,
-                max: scene.domain.max,
-                periodic: scene.domain.periodic,
+    let params = DemParams {
+        materials,
+        gravity: S::from_array(scene.gravity),
+        domain: Domain {
+            min: scene.domain.min,
+            max: scene.domain.max,
+            periodic: scene.domain.periodic,
+        },
+        // LAMMPS-like skin of a tenth of a diameter: rebuilds every few tens of steps.
+        skin: 0.1 * mean_diameter,
+    };
+    (params, material_index)
+}
+
+/// The grains of one `dem` or `hybrid` body, as they are added to the state (ids count up
+/// from 0 in the order grains are made).
+struct BodyGrains<'a> {
+    scene: &'a Scene,
+    zones: &'a ZoneField,
+    body: &'a Body,
+    /// Grain material density [kg/m³].
+    density: f64,
+    /// Index of the body's contact law in the state.
+    material: u32,
+}
+
+impl BodyGrains<'_> {
+    /// Hybrid bodies: grains in the discrete and hybrid cells only, the hybrid ones with mass
+    /// and springs scaled by 1 − w; `None` for a grain in a continuum cell.
+    fn zone_scale<S: Space>(&self, x: S::V) -> Option<f64> {
+        match self.body.model {
+            Model::Hybrid => match self.zones.zone_at(S::to_array(x)) {
+                Zone::Continuum => None,
+                Zone::Hybrid => Some(1.0 - self.scene.coupling.weight),
+                Zone::Discrete => Some(1.0),
             },
-            // LAMMPS-like skin of a tenth of a diameter: rebuilds every few tens of steps.
-            skin: 0.1 * mean_diameter,
-        },
-        time: 0.0,
-    };
-    let mut rng = Rng::new(scene.seed);
-    let mut next_id = 0u64;
-    let mut from_packing = Vec::new();
-    // Hybrid bodies: grains in the discrete and hybrid cells only, the hybrid ones with mass and
-    // springs scaled by 1 − w; `None` for a grain in a continuum cell.
-    let zone_scale = |body: &grains_protocol::scene::Body, x: S::V| match body.model {
-        Model::Hybrid => match zones.zone_at(S::to_array(x)) {
-            Zone::Continuum => None,
-            Zone::Hybrid => Some(1.0 - scene.coupling.weight),
-            Zone::Discrete => Some(1.0),
-        },
-        Model::Dem | Model::Mpm => Some(1.0),
-    };
-    for body in scene.bodies.iter().filter(|b| matches!(b.model, Model::Dem | Model::Hybrid)) {
-        let mat = &scene.materials[body.material];
-        let Some(dem) = &mat.dem else { continue };
+            Model::Dem | Model::Mpm => Some(1.0),
+        }
+    }
+
+    /// Grains of the packing file at `path` whose centre lies in the body's shape, at rest
+    /// (moving with the body's velocity unless frozen; a grain of type 2 is frozen).
+    fn add_packed<S: Space>(&self, state: &mut DemState<S>, path: &std::path::Path, from_packing: &mut Vec<bool>) -> anyhow::Result<()> {
+        let (body, dim) = (self.body, self.scene.dim());
+        let data = crate::lammps_data::read(path).map_err(anyhow::Error::msg)?;
+        for a in &data.atoms {
+            let x = S::from_array(a.x);
+            let inside = match body.shape {
+                Shape::Box { min, max } => (0..dim).all(|k| a.x[k] >= min[k] && a.x[k] <= max[k]),
+                Shape::Ball { center, radius } => (x - S::from_array(center)).length() <= radius,
+            };
+            let Some(scale) = inside.then(|| self.zone_scale::<S>(x)).flatten() else {
+                continue;
+            };
+            from_packing.push(true);
+            let r = 0.5 * a.diameter;
+            let id = state.grains.len() as u64;
+            let i = state.grains.push(id, x, r, grain_mass(dim, r, self.density), self.material);
+            state.grains.frozen[i] = a.kind == 2 || body.frozen;
+            // Frozen grains are the boundary, not material: never weighed.
+            state.grains.scale[i] = if state.grains.frozen[i] { 1.0 } else { scale };
+            if !state.grains.frozen[i] {
+                state.grains.v[i] = S::from_array(body.velocity);
+            }
+        }
+        Ok(())
+    }
+
+    /// Grains on a jittered lattice over the body's box (for a ball, its bounding box, keeping
+    /// the sites a largest grain fits inside at), radii drawn from the material's distribution.
+    fn add_lattice<S: Space>(&self, state: &mut DemState<S>, dem: &DemMaterial, rng: &mut Rng, from_packing: &mut Vec<bool>) {
+        let (body, dim) = (self.body, self.scene.dim());
         let r_max = dem.radius + 2.0 * dem.radius_std;
         let spacing = 2.0 * r_max * 1.02;
         let (lo, hi, ball) = match body.shape {
@@ -132,51 +205,28 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
                 (lo, hi, Some((S::from_array(center), radius)))
             }
         };
-        if let Some(path) = &body.packing {
-            // Grains of the packing whose centre lies in the shape, at rest.
-            let data = crate::lammps_data::read(path).map_err(anyhow::Error::msg)?;
-            for a in &data.atoms {
-                let x = S::from_array(a.x);
-                let inside = match body.shape {
-                    Shape::Box { min, max } => (0..dim).all(|k| a.x[k] >= min[k] && a.x[k] <= max[k]),
-                    Shape::Ball { center, radius } => (x - S::from_array(center)).length() <= radius,
-                };
-                let Some(scale) = inside.then(|| zone_scale(body, x)).flatten() else {
-                    continue;
-                };
-                from_packing.push(true);
-                let r = 0.5 * a.diameter;
-                let i = state
-                    .grains
-                    .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
-                state.grains.frozen[i] = a.kind == 2 || body.frozen;
-                // Frozen grains are the boundary, not material: never weighed.
-                state.grains.scale[i] = if state.grains.frozen[i] { 1.0 } else { scale };
-                if !state.grains.frozen[i] {
-                    state.grains.v[i] = S::from_array(body.velocity);
-                }
-                next_id += 1;
-            }
-            continue;
-        }
-        for x in lattice_in_box::<S>(lo, hi, spacing, r_max * 1.01, 0.01 * dem.radius, &mut rng) {
+        for x in lattice_in_box::<S>(lo, hi, spacing, r_max * 1.01, 0.01 * dem.radius, rng) {
             if let Some((c, big_r)) = ball
                 && (x - c).length() > big_r - r_max
             {
                 continue;
             }
-            let r = radius(&mut rng, dem.radius, dem.radius_std);
-            let Some(scale) = zone_scale(body, x) else { continue };
+            let r = radius(rng, dem.radius, dem.radius_std);
+            let Some(scale) = self.zone_scale::<S>(x) else { continue };
             from_packing.push(false);
-            let i = state
-                .grains
-                .push(next_id, x, r, grain_mass(dim, r, mat.density), material_index[body.material]);
+            let id = state.grains.len() as u64;
+            let i = state.grains.push(id, x, r, grain_mass(dim, r, self.density), self.material);
             state.grains.frozen[i] = body.frozen;
             state.grains.scale[i] = if body.frozen { 1.0 } else { scale };
             state.grains.v[i] = S::from_array(body.velocity);
-            next_id += 1;
         }
     }
+}
+
+/// The scene's walls (a box as 2 planes per axis), translating and spinning as the scene
+/// says, each with the index of its scene wall.
+fn add_walls<S: Space>(state: &mut DemState<S>, scene: &Scene) {
+    let dim = scene.dim();
     for (id, w) in scene.walls.iter().enumerate() {
         let mut add = |mut wall: Wall<S>| {
             wall.velocity = S::from_array(w.velocity);
@@ -199,8 +249,11 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
             WallShape::Segment { from, to } => add(Wall::segment(S::from_array(from), S::from_array(to), w.friction)),
         }
     }
-    // Lattice sites a wall cuts through (a drum's curve, a hopper's slope) stay empty; grains
-    // of a packing keep the small overlaps they settled with.
+}
+
+/// Lattice sites a wall cuts through (a drum's curve, a hopper's slope) stay empty; grains
+/// of a packing (`from_packing`, per grain) keep the small overlaps they settled with.
+fn drop_grains_cut_by_walls<S: Space>(state: &mut DemState<S>, from_packing: &[bool]) {
     let keep: Vec<bool> = (0..state.grains.len())
         .map(|i| {
             from_packing[i]
@@ -219,5 +272,4 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
             state.grains.v[j] = old.v[i];
         }
     }
-    Ok(state)
 }

@@ -1,7 +1,7 @@
 //! Scene → material points and step parameters: the only place where the scene file meets the
 //! MPM library.
 
-use grains_grid::Space;
+use grains_grid::{Grid, Space};
 use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
 use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
@@ -123,14 +123,32 @@ fn vec<S: Space>(a: [f64; 3]) -> S::V {
 pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>, MpmParams<S>), String> {
     let dim = scene.dim();
     let (material_index, material) = mpm_material(scene)?;
-    let h = scene.domain.cell_size;
-    let per_axis = scene.mpm.points_per_axis as usize;
     let (grid, kernel) = grains_service::grid::scene_grid(scene);
-    let spacing = h / per_axis as f64;
-    let volume = spacing.powi(dim as i32);
-    let rho = bulk_density(material);
-    let packing = material.mpm.as_ref().map_or(1.0, |m| m.packing);
-    let walls: Vec<Wall<S>> = scene
+    let walls = walls::<S>(scene);
+    let pts = seed_points::<S>(scene, zones, (material_index, material), &grid, &walls);
+    let params = MpmParams {
+        grid,
+        kernel,
+        model: model(material, dim),
+        gravity: vec::<S>(scene.gravity),
+        transfer: match scene.mpm.flip {
+            Some(beta) => Transfer::Flip(beta),
+            None => Transfer::Apic,
+        },
+        domain_walls: Some(match scene.mpm.domain_walls {
+            MpmDomainWalls::Slip => Contact::Slip,
+            MpmDomainWalls::Sticky => Contact::Sticky,
+        }),
+        walls,
+    };
+    Ok((pts, params))
+}
+
+/// The scene's walls as the MPM's: geometry (a segment [`SEGMENT_CELLS`] cells thick), contact
+/// (sticky, else frictional, else slip) and velocity, each with the index of its scene wall.
+fn walls<S: MpmSpace>(scene: &Scene) -> Vec<Wall<S>> {
+    let h = scene.domain.cell_size;
+    scene
         .walls
         .iter()
         .enumerate()
@@ -170,7 +188,27 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
                 id,
             }
         })
-        .collect();
+        .collect()
+}
+
+/// The points of every mpm and hybrid body (of `material`, index and material): seeded
+/// `points_per_axis` per cell and axis of `grid` at the bulk density, none behind a wall, a
+/// hybrid body's only in its hybrid (weight w) and continuum cells; moving at the body's
+/// velocity, and a box body under its confining pressure.
+fn seed_points<S: MpmSpace>(
+    scene: &Scene,
+    zones: &ZoneField,
+    (material_index, material): (usize, &Material),
+    grid: &Grid,
+    walls: &[Wall<S>],
+) -> Points<S> {
+    let dim = scene.dim();
+    let h = scene.domain.cell_size;
+    let per_axis = scene.mpm.points_per_axis as usize;
+    let spacing = h / per_axis as f64;
+    let volume = spacing.powi(dim as i32);
+    let rho = bulk_density(material);
+    let packing = material.mpm.as_ref().map_or(1.0, |m| m.packing);
     let mut pts = Points::<S>::default();
     for body in scene.bodies.iter().filter(|b| b.model != BodyModel::Dem) {
         debug_assert_eq!(body.material, material_index);
@@ -204,20 +242,5 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             confine(&mut pts, all, min, max, spacing, body.confining_pressure);
         }
     }
-    let params = MpmParams {
-        grid,
-        kernel,
-        model: model(material, dim),
-        gravity: vec::<S>(scene.gravity),
-        transfer: match scene.mpm.flip {
-            Some(beta) => Transfer::Flip(beta),
-            None => Transfer::Apic,
-        },
-        domain_walls: Some(match scene.mpm.domain_walls {
-            MpmDomainWalls::Slip => Contact::Slip,
-            MpmDomainWalls::Sticky => Contact::Sticky,
-        }),
-        walls,
-    };
-    Ok((pts, params))
+    pts
 }

@@ -215,34 +215,10 @@ impl OracleState {
 
     /// One epoch at `time` over the DEM's grains and stress and the MPM's points.
     pub fn epoch(&mut self, scene: &Scene, time: f64, grains: &[EpochItem], stress: &[NodeStress], points: &[EpochItem]) -> EpochMessages {
-        let (mut mass, mut momentum) = (0.0, [0.0; 3]);
-        for it in grains.iter().chain(points) {
-            mass += it.share * it.mass;
-            (0..3).for_each(|k| momentum[k] += it.share * it.mass * it.velocity[k]);
-        }
+        let (mass, momentum) = totals(grains, points);
         let stress: BTreeMap<u64, [[f64; 3]; 3]> = stress.iter().map(|n| (n.node, from_voigt(n.stress))).collect();
-        let grains_in: Vec<Grain> = grains
-            .iter()
-            .map(|g| Grain {
-                id: g.id,
-                x: g.position,
-                radius: g.radius,
-                mass: g.mass,
-                share: g.share,
-                v: g.velocity,
-                fixed: g.flags & grains_protocol::wire::EPOCH_FIXED != 0,
-            })
-            .collect();
-        let points_in: Vec<Point> = points
-            .iter()
-            .map(|p| Point {
-                id: p.id,
-                x: p.position,
-                mass: p.mass,
-                share: p.share,
-                v: p.velocity,
-            })
-            .collect();
+        let grains_in: Vec<Grain> = grains.iter().map(oracle_grain).collect();
+        let points_in: Vec<Point> = points.iter().map(oracle_point).collect();
         // New ids above every id either solver has used.
         let max_id = |items: &[EpochItem]| items.iter().map(|i| i.id + 1).max().unwrap_or(0);
         self.next_ids = (self.next_ids.0.max(max_id(grains)), self.next_ids.1.max(max_id(points)));
@@ -270,51 +246,91 @@ impl OracleState {
         }
         self.next_ids.0 += plan.new_grains.len() as u64;
         self.next_ids.1 += plan.new_points.len() as u64;
-        let zones = plan
-            .zones
-            .iter()
-            .enumerate()
-            .filter(|(_, z)| **z != Zone::Discrete)
-            .map(|(c, &z)| ZoneCell {
-                cell: c as u64,
-                zone: z as u32,
-                _pad: 0,
-                distance: plan.distance[c] - self.settings.centre,
-            })
-            .collect();
-        let out = EpochMessages {
-            zones,
-            delete_grains: plan.delete_grains.clone(),
-            delete_points: plan.delete_points.clone(),
-            spawn_grains: plan
-                .new_grains
-                .iter()
-                .map(|g| SpawnGrain {
-                    id: g.id,
-                    radius: g.radius,
-                    position: g.x,
-                    velocity: g.v,
-                })
-                .collect(),
-            spawn_points: plan
-                .new_points
-                .iter()
-                .map(|p| SpawnPoint {
-                    id: p.id,
-                    volume: p.volume,
-                    mass: p.mass,
-                    position: p.x,
-                    velocity: p.v,
-                    stress: to_voigt(&p.stress),
-                })
-                .collect(),
-            scale_points: plan.scale_points.iter().map(|&(id, factor)| PointScale { id, factor }).collect(),
-            mass_before: mass,
-            momentum_before: momentum,
-            hybrid_cells: plan.zones.iter().filter(|z| **z == Zone::Hybrid).count() as u64,
-        };
+        let out = messages(&plan, self.settings.centre, mass, momentum);
         self.zones = plan.zones;
         out
+    }
+}
+
+/// Total mass and momentum of the items as the solvers weigh them (their share).
+fn totals(grains: &[EpochItem], points: &[EpochItem]) -> (f64, [f64; 3]) {
+    let (mut mass, mut momentum) = (0.0, [0.0; 3]);
+    for it in grains.iter().chain(points) {
+        mass += it.share * it.mass;
+        (0..3).for_each(|k| momentum[k] += it.share * it.mass * it.velocity[k]);
+    }
+    (mass, momentum)
+}
+
+/// A grain of the DEM's epoch message as the oracle sees it.
+fn oracle_grain(g: &EpochItem) -> Grain {
+    Grain {
+        id: g.id,
+        x: g.position,
+        radius: g.radius,
+        mass: g.mass,
+        share: g.share,
+        v: g.velocity,
+        fixed: g.flags & grains_protocol::wire::EPOCH_FIXED != 0,
+    }
+}
+
+/// A point of the MPM's epoch message as the oracle sees it.
+fn oracle_point(p: &EpochItem) -> Point {
+    Point {
+        id: p.id,
+        x: p.position,
+        mass: p.mass,
+        share: p.share,
+        v: p.velocity,
+    }
+}
+
+/// What the solvers are sent of `plan`: the non-discrete cells with their distance from the
+/// band's centre `centre`, and each solver's lists; `mass` and `momentum` before the epoch.
+fn messages(plan: &epoch::Plan, centre: f64, mass: f64, momentum: [f64; 3]) -> EpochMessages {
+    let zones = plan
+        .zones
+        .iter()
+        .enumerate()
+        .filter(|(_, z)| **z != Zone::Discrete)
+        .map(|(c, &z)| ZoneCell {
+            cell: c as u64,
+            zone: z as u32,
+            _pad: 0,
+            distance: plan.distance[c] - centre,
+        })
+        .collect();
+    EpochMessages {
+        zones,
+        delete_grains: plan.delete_grains.clone(),
+        delete_points: plan.delete_points.clone(),
+        spawn_grains: plan
+            .new_grains
+            .iter()
+            .map(|g| SpawnGrain {
+                id: g.id,
+                radius: g.radius,
+                position: g.x,
+                velocity: g.v,
+            })
+            .collect(),
+        spawn_points: plan
+            .new_points
+            .iter()
+            .map(|p| SpawnPoint {
+                id: p.id,
+                volume: p.volume,
+                mass: p.mass,
+                position: p.x,
+                velocity: p.v,
+                stress: to_voigt(&p.stress),
+            })
+            .collect(),
+        scale_points: plan.scale_points.iter().map(|&(id, factor)| PointScale { id, factor }).collect(),
+        mass_before: mass,
+        momentum_before: momentum,
+        hybrid_cells: plan.zones.iter().filter(|z| **z == Zone::Hybrid).count() as u64,
     }
 }
 
