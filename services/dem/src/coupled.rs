@@ -10,18 +10,19 @@
 //! 4. [`CoupledStep::finish`] (Alg. 5–6): the hybrid grains take the constrained velocities
 //!    back, by the run's [`GrainTransfer`].
 //!
-//! The stage owns the scratch of one step (the saved positions by grain id, the raster, the
-//! carried impulse) and, for [`GrainTransfer::Flip`], the node accelerations the coupling
-//! gave the last step. Maps by grain id and node are only looked up; everything that comes
-//! out runs over the grains in storage order or over the raster in node order, so the result
-//! does not depend on hashing.
+//! The stage owns the scratch of one step (the hybrid grains' storage indices and saved
+//! positions, the raster sorted by node, the carried impulse) and, for
+//! [`GrainTransfer::Flip`], the node accelerations the coupling gave the last step. The
+//! substeps keep the grains' storage order (the pipeline re-sorts between macro-steps only),
+//! so grains are addressed by index; nodes are found by binary search in node-sorted lists.
+//! Everything runs over the grains in storage order or over the raster in node order, so the
+//! result does not depend on threads.
 
 use crate::coupling::{self, NodeMomentum};
 use crate::pipeline::DemPipeline;
 use crate::space::Space;
 use crate::state::DemState;
 use grains_grid::{Grid, Kernel};
-use std::collections::HashMap;
 
 /// How a hybrid grain takes the coupler's node velocities back (Alg. 5–6).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,27 +57,35 @@ pub struct CouplingParams {
 #[derive(Clone, Debug)]
 pub struct CoupledStep<S: Space> {
     pub params: CouplingParams,
-    /// The step in progress: the hybrid grains by id with their positions at its start.
-    hybrid: HashMap<u64, S::V>,
-    /// The raster of their predicted momentum, by node index.
+    /// The step in progress: storage indices of the hybrid grains, ascending...
+    hybrid: Vec<u32>,
+    /// ... and their positions at its start.
+    saved: Vec<S::V>,
+    /// The raster of their predicted momentum, sorted by node.
     raster: Vec<NodeMomentum<S>>,
     /// With [`GrainTransfer::Flip`]: per node of `raster`, the impulse of the coupling forces
     /// the grains carried through the substeps (`external`), which the coupler must not see: it
     /// is taken out of the raster it is sent.
     carried: Vec<S::V>,
     /// With [`GrainTransfer::Flip`]: each constrained node's coupling acceleration of the last
-    /// step [m/s²].
-    accel: HashMap<u64, S::V>,
+    /// step [m/s²], sorted by node.
+    accel: Vec<(u64, S::V)>,
+}
+
+/// The value of `node` in a node-sorted list.
+fn lookup<T: Copy>(list: &[(u64, T)], node: u64) -> Option<T> {
+    list.binary_search_by_key(&node, |e| e.0).ok().map(|k| list[k].1)
 }
 
 impl<S: Space> CoupledStep<S> {
     pub fn new(params: CouplingParams) -> Self {
         CoupledStep {
             params,
-            hybrid: HashMap::new(),
+            hybrid: Vec::new(),
+            saved: Vec::new(),
             raster: Vec::new(),
             carried: Vec::new(),
-            accel: HashMap::new(),
+            accel: Vec::new(),
         }
     }
 
@@ -87,7 +96,8 @@ impl<S: Space> CoupledStep<S> {
     }
 
     /// Yue 2018 Alg. 2: saves the hybrid grains' positions and runs `substeps` steps of
-    /// dt / substeps (hybrid grains with mass and springs scaled by 1 − w).
+    /// dt / substeps (hybrid grains with mass and springs scaled by 1 − w), keeping the
+    /// grains' storage order.
     ///
     /// With [`GrainTransfer::Flip`] the substeps also push every hybrid grain with the last
     /// step's coupling acceleration of the nodes around it: the coupling force then acts on the
@@ -96,48 +106,46 @@ impl<S: Space> CoupledStep<S> {
     /// only corrects what changed.
     pub fn advance(&mut self, state: &mut DemState<S>, pipeline: &mut DemPipeline<S>, dt: f64, substeps: usize) {
         let (grid, kernel) = (&self.params.grid, self.params.kernel);
-        let g = &state.grains;
+        // A re-sort due happens now, before the grains are taken by index.
+        pipeline.settle(state);
+        let g = &mut state.grains;
         // Frozen grains never move: never hybrid.
-        self.hybrid = (0..g.len())
-            .filter(|&i| g.scale[i] < 1.0 && !g.frozen[i])
-            .map(|i| (g.id[i], g.x[i]))
-            .collect();
+        self.hybrid.clear();
+        self.hybrid
+            .extend((0..g.len()).filter(|&i| g.scale[i] < 1.0 && !g.frozen[i]).map(|i| i as u32));
+        self.saved.clear();
+        self.saved.extend(self.hybrid.iter().map(|&i| g.x[i as usize]));
         if self.params.transfer == GrainTransfer::Flip {
             // Nodes the coupler did not constrain last step push nothing.
-            let g = &mut state.grains;
-            let accel = |n: u64| Some(self.accel.get(&n).copied().unwrap_or_default());
-            for i in 0..g.len() {
-                if self.hybrid.contains_key(&g.id[i]) {
-                    let (a, _) = coupling::interpolate::<S>(grid, kernel, g.x[i], accel);
-                    g.external[i] = a * (g.mass[i] * g.scale[i]);
-                }
+            let accel = &self.accel;
+            let at = |n: u64| Some(lookup(accel, n).unwrap_or_default());
+            for &i in &self.hybrid {
+                let i = i as usize;
+                let (a, _) = coupling::interpolate::<S>(grid, kernel, g.x[i], at);
+                g.external[i] = a * (g.mass[i] * g.scale[i]);
             }
         }
-        pipeline.run(state, dt / substeps as f64, substeps);
+        pipeline.run_in_order(state, dt / substeps as f64, substeps);
     }
 
     /// Yue 2018 Alg. 4: the hybrid grains' weighted mass (1 − w) m and predicted momentum,
-    /// at their saved positions, onto the MPM grid with its weights, by node index (call after
-    /// [`CoupledStep::advance`] of the same step of length `dt`). With
+    /// at their saved positions, onto the MPM grid with its weights, sorted by node (call
+    /// after [`CoupledStep::advance`] of the same step of length `dt`). With
     /// [`GrainTransfer::Flip`] also the impulse of the push they carried, on the same nodes
     /// with the same weights.
     pub fn rasterize(&mut self, state: &DemState<S>, dt: f64) -> &[NodeMomentum<S>] {
         let (grid, kernel) = (&self.params.grid, self.params.kernel);
         let g = &state.grains;
-        let saved: Vec<S::V> = (0..g.len()).map(|i| self.hybrid.get(&g.id[i]).copied().unwrap_or(g.x[i])).collect();
-        let mass: Vec<f64> = (0..g.len()).map(|i| g.mass[i] * g.scale[i]).collect();
-        let hybrid = &self.hybrid;
-        let include = |i: usize| hybrid.contains_key(&g.id[i]);
-        self.raster = coupling::rasterize::<S>(grid, kernel, &saved, &g.v, &mass, include);
-        self.carried.clear();
-        if self.params.transfer == GrainTransfer::Flip {
-            // The push's impulse per node, Σ w F dt, with the raster's weights and nodes.
-            let impulse: Vec<S::V> = (0..g.len())
-                .map(|i| g.external[i] * (dt / mass[i].max(f64::MIN_POSITIVE)))
-                .collect();
-            let r = coupling::rasterize::<S>(grid, kernel, &saved, &impulse, &mass, include);
-            self.carried = r.into_iter().map(|n| n.momentum).collect();
-        }
+        let flip = self.params.transfer == GrainTransfer::Flip;
+        let items = self.hybrid.iter().zip(&self.saved).map(|(&i, &x0)| {
+            let i = i as usize;
+            // The push's impulse F dt, rasterized as Σ w F dt (the mass weights cancel).
+            let impulse = if flip { g.external[i] * dt } else { S::V::default() };
+            (x0, g.v[i], g.mass[i] * g.scale[i], impulse)
+        });
+        let (raster, carried) = coupling::rasterize_with_impulse::<S>(grid, kernel, items);
+        self.raster = raster;
+        self.carried = if flip { carried } else { Vec::new() };
         &self.raster
     }
 
@@ -177,61 +185,72 @@ impl<S: Space> CoupledStep<S> {
             return;
         }
         let (grid, kernel) = (&self.params.grid, self.params.kernel);
-        let constrained: HashMap<u64, S::V> = constrained.into_iter().collect();
-        let own: HashMap<u64, S::V> = self.raster.iter().map(|r| (r.node, r.momentum * (1.0 / r.mass))).collect();
-        let node_velocity = |n: u64| constrained.get(&n).or_else(|| own.get(&n)).copied();
         let flip = self.params.transfer == GrainTransfer::Flip;
-        // Each node's velocity without any coupling force (its own without the push).
-        let free: HashMap<u64, S::V> = self
+        // Per node of the raster (node order): its own velocity, its velocity without any
+        // coupling force (its own without the push), and the coupler's if it constrained it.
+        let mut given: Vec<(u64, S::V)> = constrained.into_iter().collect();
+        given.sort_unstable_by_key(|e| e.0);
+        struct Node<V> {
+            own: V,
+            free: V,
+            constrained: Option<V>,
+        }
+        let nodes: Vec<(u64, Node<S::V>)> = self
             .raster
             .iter()
             .enumerate()
-            .map(|(k, r)| (r.node, self.uncoupled_momentum(k) * (1.0 / r.mass)))
+            .map(|(k, r)| {
+                let inv = 1.0 / r.mass;
+                let node = Node {
+                    own: r.momentum * inv,
+                    free: self.uncoupled_momentum(k) * inv,
+                    constrained: lookup(&given, r.node),
+                };
+                (r.node, node)
+            })
             .collect();
+        let node = |n: u64| nodes.binary_search_by_key(&n, |e| e.0).ok().map(|k| &nodes[k].1);
         if flip {
             // The whole coupling acceleration of each node: its constrained velocity minus
             // the velocity it would have had without any coupling force.
-            self.accel = free
+            self.accel = nodes
                 .iter()
-                .filter_map(|(n, f)| constrained.get(n).map(|v| (*n, (*v - *f) * (1.0 / dt))))
+                .filter_map(|(n, s)| s.constrained.map(|v| (*n, (v - s.free) * (1.0 / dt))))
                 .collect();
         }
-        let g = &mut state.grains;
+        let node_velocity = |n: u64| node(n).map(|s| s.constrained.unwrap_or(s.own));
         // The coupling's change of each node velocity. Where the coupler did not act the
         // node goes back to its uncoupled velocity: the part of the push spread there is
         // taken back.
-        let change = |n: u64| {
-            let o = own.get(&n).copied().unwrap_or_default();
-            Some(constrained.get(&n).or_else(|| free.get(&n)).map_or(S::V::default(), |c| *c - o))
-        };
-        for i in 0..g.len() {
-            if let Some(&x0) = self.hybrid.get(&g.id[i]) {
-                if flip {
-                    // The rest of the coupling force, spread evenly over the step, changes
-                    // the velocity by dv and the position by dv dt / 2.
-                    let (dv, _) = coupling::interpolate::<S>(grid, kernel, x0, change);
-                    g.v[i] += dv;
-                    g.x[i] += dv * (0.5 * dt);
-                    // Its spin is not coupled otherwise: where the material is
-                    // quasi-static the grain turns with it (held up by the coupling, it
-                    // would be spun up by the sliding of its contacts: 35 rad/s in a
-                    // resting layer, which creeps 0.3 d in 0.5 s); where it flows the grain
-                    // rolls (turning with the material there, a = 0.5 columns stop at
-                    // 2/3 of the DEM's runout). I² = γ̇² d / |g| < I_c², without a division.
-                    let (_, grad) = coupling::interpolate::<S>(grid, kernel, x0, node_velocity);
-                    let rate = grad.shear_rate(S::DIM);
-                    let d = 2.0 * g.radius[i];
-                    if rate * rate * d < self.params.quasi_static * self.params.quasi_static * self.params.gravity {
-                        g.omega[i] = grad.spin::<S>();
-                    }
-                } else {
-                    let (v, grad) = coupling::interpolate::<S>(grid, kernel, x0, node_velocity);
-                    g.v[i] = v;
+        let change = |n: u64| Some(node(n).map_or(S::V::default(), |s| s.constrained.unwrap_or(s.free) - s.own));
+        let g = &mut state.grains;
+        for (&i, &x0) in self.hybrid.iter().zip(&self.saved) {
+            let i = i as usize;
+            if flip {
+                // The rest of the coupling force, spread evenly over the step, changes the
+                // velocity by dv and the position by dv dt / 2.
+                let (dv, _) = coupling::interpolate::<S>(grid, kernel, x0, change);
+                g.v[i] += dv;
+                g.x[i] += dv * (0.5 * dt);
+                // Its spin is not coupled otherwise: where the material is quasi-static the
+                // grain turns with it (held up by the coupling, it would be spun up by the
+                // sliding of its contacts: 35 rad/s in a resting layer, which creeps 0.3 d in
+                // 0.5 s); where it flows the grain rolls (turning with the material there,
+                // a = 0.5 columns stop at 2/3 of the DEM's runout). I² = γ̇² d / |g| < I_c²,
+                // without a division.
+                let (_, grad) = coupling::interpolate::<S>(grid, kernel, x0, node_velocity);
+                let rate = grad.shear_rate(S::DIM);
+                let d = 2.0 * g.radius[i];
+                if rate * rate * d < self.params.quasi_static * self.params.quasi_static * self.params.gravity {
                     g.omega[i] = grad.spin::<S>();
-                    g.x[i] = x0 + v * dt;
                 }
+            } else {
+                let (v, grad) = coupling::interpolate::<S>(grid, kernel, x0, node_velocity);
+                g.v[i] = v;
+                g.omega[i] = grad.spin::<S>();
+                g.x[i] = x0 + v * dt;
             }
         }
-        pipeline.invalidate();
+        pipeline.moved();
     }
 }

@@ -36,20 +36,48 @@ pub fn rasterize<S: Space>(
     mass: &[f64],
     include: impl Fn(usize) -> bool,
 ) -> Vec<NodeMomentum<S>> {
-    let mut nodes: std::collections::BTreeMap<u64, (f64, S::V)> = std::collections::BTreeMap::new();
-    for k in (0..x.len()).filter(|&k| include(k)) {
-        for_each_node::<S>(grid, kernel, x[k], |node, w, _| {
+    let items = (0..x.len()).filter(|&k| include(k)).map(|k| (x[k], v[k], mass[k], S::V::default()));
+    rasterize_with_impulse::<S>(grid, kernel, items).0
+}
+
+/// Alg. 4 over `(position, velocity, weighted mass, impulse)` items: each node's weighted
+/// mass Σ w m, momentum Σ w m v and impulse Σ w J, sorted by node. The contributions are
+/// gathered as a list, sorted by node with a stable sort and summed in item order, so the
+/// sums do not depend on threads or hashing (and no map is built per step).
+pub fn rasterize_with_impulse<S: Space>(
+    grid: &Grid,
+    kernel: Kernel,
+    items: impl Iterator<Item = (S::V, S::V, f64, S::V)>,
+) -> (Vec<NodeMomentum<S>>, Vec<S::V>) {
+    let mut parts: Vec<(u64, f64, S::V, S::V)> = Vec::new();
+    for (x, v, m, impulse) in items {
+        for_each_node::<S>(grid, kernel, x, |node, w, _| {
             if w > 0.0 {
-                let e = nodes.entry(node).or_insert((0.0, S::V::default()));
-                e.0 += w * mass[k];
-                e.1 += v[k] * (w * mass[k]);
+                parts.push((node, w * m, v * (w * m), impulse * w));
             }
         });
     }
-    nodes
-        .into_iter()
-        .map(|(node, (mass, momentum))| NodeMomentum { node, mass, momentum })
-        .collect()
+    parts.sort_by_key(|p| p.0);
+    let mut nodes: Vec<NodeMomentum<S>> = Vec::new();
+    let mut impulses: Vec<S::V> = Vec::new();
+    for (node, m, p, j) in parts {
+        match nodes.last_mut() {
+            Some(last) if last.node == node => {
+                last.mass += m;
+                last.momentum += p;
+                *impulses.last_mut().expect("one per node") += j;
+            }
+            _ => {
+                nodes.push(NodeMomentum {
+                    node,
+                    mass: m,
+                    momentum: p,
+                });
+                impulses.push(j);
+            }
+        }
+    }
+    (nodes, impulses)
 }
 
 /// The gradient L[a][b] = ∂v_a/∂x_b of an interpolated velocity field (zero rows and columns

@@ -60,6 +60,12 @@ pub struct DemPipeline<S: Space> {
     /// The last pair evaluation added straight into `forces` (one range).
     direct: bool,
     prepared: bool,
+    /// Grains moved outside of a step ([`DemPipeline::moved`]): forces are due again.
+    resync: bool,
+    /// Keep the grains' storage order ([`DemPipeline::run_in_order`]); a re-sort that fell
+    /// due meanwhile waits for the next [`DemPipeline::moved`].
+    hold_order: bool,
+    sort_due: bool,
 }
 
 /// Error building a pipeline (thread pool).
@@ -102,6 +108,9 @@ impl<S: Space> DemPipeline<S> {
             hot: Vec::new(),
             direct: false,
             prepared: false,
+            resync: false,
+            hold_order: false,
+            sort_due: false,
         })
     }
 
@@ -109,6 +118,32 @@ impl<S: Space> DemPipeline<S> {
     /// outside of [`DemPipeline::step`].
     pub fn invalidate(&mut self) {
         self.prepared = false;
+    }
+
+    /// Some grains moved or changed velocity outside of a step, the grains themselves and
+    /// their order unchanged (a coupled step's transfer back): the next step evaluates their
+    /// forces at the new positions first, and rebuilds the neighbour list only if a grain
+    /// moved more than skin/2 since its build (or a re-sort fell due).
+    pub fn moved(&mut self) {
+        self.resync = true;
+    }
+
+    /// Brings the forces up to date with the state (after [`DemPipeline::invalidate`] or
+    /// [`DemPipeline::moved`]); a re-sort of the grains that is due happens here. After it,
+    /// [`DemPipeline::run_in_order`] keeps every grain at its storage index.
+    pub fn settle(&mut self, state: &mut DemState<S>) {
+        let pool = self.pool.clone();
+        pool.install(|| self.prepare(state));
+    }
+
+    /// Advances the state by `n` steps of dt keeping the grains' storage order (no re-sort),
+    /// so that a caller may address grains by index across the steps (settled first, so
+    /// that the indices it took after [`DemPipeline::settle`] hold).
+    pub fn run_in_order(&mut self, state: &mut DemState<S>, dt: f64, n: usize) {
+        self.settle(state);
+        self.hold_order = true;
+        self.run(state, dt, n);
+        self.hold_order = false;
     }
 
     /// Advances the state by one step of dt.
@@ -127,6 +162,29 @@ impl<S: Space> DemPipeline<S> {
     }
 
     fn step_in_pool(&mut self, state: &mut DemState<S>, dt: f64) {
+        self.prepare(state);
+        let moved = self.kick_drift(state, dt);
+        if self.neighbors.needs_rebuild(state, moved) {
+            if self.neighbors.builds.is_multiple_of(SORT_EVERY) {
+                if self.hold_order {
+                    self.sort_due = true;
+                } else {
+                    self.sort_grains(state);
+                    self.refresh_hot(state);
+                }
+            }
+            self.neighbors.build(state);
+        }
+        self.pair_forces(state, dt);
+        self.finish_forces(state, 0.5 * dt);
+        state.time += dt;
+    }
+
+    /// The forces of the current positions, if they are not known: everything anew after
+    /// [`DemPipeline::invalidate`] (or a change in the number of grains), the hot copy and the
+    /// forces after [`DemPipeline::moved`] (the neighbour list only if stale, or a re-sort if
+    /// one is due and the order is not held).
+    fn prepare(&mut self, state: &mut DemState<S>) {
         if !self.prepared || self.forces.len() != state.grains.len() {
             self.forces = vec![GrainForce::default(); state.grains.len()];
             self.sort_grains(state);
@@ -135,18 +193,21 @@ impl<S: Space> DemPipeline<S> {
             self.pair_forces(state, 0.0);
             self.finish_forces(state, 0.0);
             self.prepared = true;
-        }
-        let moved = self.kick_drift(state, dt);
-        if self.neighbors.needs_rebuild(state, moved) {
-            if self.neighbors.builds.is_multiple_of(SORT_EVERY) {
+            self.resync = false;
+        } else if self.resync {
+            self.refresh_hot(state);
+            if self.sort_due && !self.hold_order {
                 self.sort_grains(state);
                 self.refresh_hot(state);
+                self.sort_due = false;
+                self.neighbors.build(state);
+            } else if self.neighbors.stale(state) {
+                self.neighbors.build(state);
             }
-            self.neighbors.build(state);
+            self.pair_forces(state, 0.0);
+            self.finish_forces(state, 0.0);
+            self.resync = false;
         }
-        self.pair_forces(state, dt);
-        self.finish_forces(state, 0.5 * dt);
-        state.time += dt;
     }
 
     /// Re-sorts the grains by cell (memory follows space, as LAMMPS' `atom_modify sort`);
