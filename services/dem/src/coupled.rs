@@ -18,7 +18,7 @@
 //! Everything runs over the grains in storage order or over the raster in node order, so the
 //! result does not depend on threads.
 
-use crate::coupling::{self, NodeMomentum};
+use crate::coupling::{NodeMomentum, Stencils};
 use crate::pipeline::DemPipeline;
 use crate::space::Space;
 use crate::state::DemState;
@@ -61,7 +61,10 @@ pub struct CoupledStep<S: Space> {
     hybrid: Vec<u32>,
     /// ... and their positions at its start.
     saved: Vec<S::V>,
-    /// The raster of their predicted momentum, sorted by node.
+    /// The grid nodes around the saved positions, with weights: every transfer of the step
+    /// uses them (evaluated once, nodes addressed by slot).
+    stencils: Stencils<S>,
+    /// The raster of their predicted momentum, one entry per slot of `stencils` (node order).
     raster: Vec<NodeMomentum<S>>,
     /// With [`GrainTransfer::Flip`]: per node of `raster`, the impulse of the coupling forces
     /// the grains carried through the substeps (`external`), which the coupler must not see: it
@@ -83,6 +86,7 @@ impl<S: Space> CoupledStep<S> {
             params,
             hybrid: Vec::new(),
             saved: Vec::new(),
+            stencils: Stencils::default(),
             raster: Vec::new(),
             carried: Vec::new(),
             accel: Vec::new(),
@@ -115,13 +119,19 @@ impl<S: Space> CoupledStep<S> {
             .extend((0..g.len()).filter(|&i| g.scale[i] < 1.0 && !g.frozen[i]).map(|i| i as u32));
         self.saved.clear();
         self.saved.extend(self.hybrid.iter().map(|&i| g.x[i as usize]));
+        self.stencils.build(grid, kernel, &self.saved);
         if self.params.transfer == GrainTransfer::Flip {
-            // Nodes the coupler did not constrain last step push nothing.
-            let accel = &self.accel;
-            let at = |n: u64| Some(lookup(accel, n).unwrap_or_default());
-            for &i in &self.hybrid {
+            // Each slot's acceleration of the last step; nodes the coupler did not constrain
+            // then push nothing.
+            let accel: Vec<S::V> = self
+                .stencils
+                .nodes
+                .iter()
+                .map(|&n| lookup(&self.accel, n).unwrap_or_default())
+                .collect();
+            for (k, &i) in self.hybrid.iter().enumerate() {
                 let i = i as usize;
-                let (a, _) = coupling::interpolate::<S>(grid, kernel, g.x[i], at);
+                let (a, _) = self.stencils.interpolate(k, |slot| Some(accel[slot]));
                 g.external[i] = a * (g.mass[i] * g.scale[i]);
             }
         }
@@ -134,16 +144,15 @@ impl<S: Space> CoupledStep<S> {
     /// [`GrainTransfer::Flip`] also the impulse of the push they carried, on the same nodes
     /// with the same weights.
     pub fn rasterize(&mut self, state: &DemState<S>, dt: f64) -> &[NodeMomentum<S>] {
-        let (grid, kernel) = (&self.params.grid, self.params.kernel);
         let g = &state.grains;
         let flip = self.params.transfer == GrainTransfer::Flip;
-        let items = self.hybrid.iter().zip(&self.saved).map(|(&i, &x0)| {
+        let items = self.hybrid.iter().map(|&i| {
             let i = i as usize;
-            // The push's impulse F dt, rasterized as Σ w F dt (the mass weights cancel).
+            // The push's impulse F dt, rasterized as Σ w F dt.
             let impulse = if flip { g.external[i] * dt } else { S::V::default() };
-            (x0, g.v[i], g.mass[i] * g.scale[i], impulse)
+            (g.mass[i] * g.scale[i], g.v[i], impulse)
         });
-        let (raster, carried) = coupling::rasterize_with_impulse::<S>(grid, kernel, items);
+        let (raster, carried) = self.stencils.rasterize(items);
         self.raster = raster;
         self.carried = if flip { carried } else { Vec::new() };
         &self.raster
@@ -184,52 +193,35 @@ impl<S: Space> CoupledStep<S> {
         if self.hybrid.is_empty() {
             return;
         }
-        let (grid, kernel) = (&self.params.grid, self.params.kernel);
         let flip = self.params.transfer == GrainTransfer::Flip;
-        // Per node of the raster (node order): its own velocity, its velocity without any
+        // Per slot of the raster (node order): its own velocity, its velocity without any
         // coupling force (its own without the push), and the coupler's if it constrained it.
         let mut given: Vec<(u64, S::V)> = constrained.into_iter().collect();
         given.sort_unstable_by_key(|e| e.0);
-        struct Node<V> {
-            own: V,
-            free: V,
-            constrained: Option<V>,
-        }
-        let nodes: Vec<(u64, Node<S::V>)> = self
-            .raster
-            .iter()
-            .enumerate()
-            .map(|(k, r)| {
-                let inv = 1.0 / r.mass;
-                let node = Node {
-                    own: r.momentum * inv,
-                    free: self.uncoupled_momentum(k) * inv,
-                    constrained: lookup(&given, r.node),
-                };
-                (r.node, node)
-            })
+        let own: Vec<S::V> = self.raster.iter().map(|r| r.momentum * (1.0 / r.mass)).collect();
+        let free: Vec<S::V> = (0..self.raster.len())
+            .map(|k| self.uncoupled_momentum(k) * (1.0 / self.raster[k].mass))
             .collect();
-        let node = |n: u64| nodes.binary_search_by_key(&n, |e| e.0).ok().map(|k| &nodes[k].1);
+        let fixed: Vec<Option<S::V>> = self.raster.iter().map(|r| lookup(&given, r.node)).collect();
         if flip {
             // The whole coupling acceleration of each node: its constrained velocity minus
             // the velocity it would have had without any coupling force.
-            self.accel = nodes
-                .iter()
-                .filter_map(|(n, s)| s.constrained.map(|v| (*n, (v - s.free) * (1.0 / dt))))
+            self.accel = (0..self.raster.len())
+                .filter_map(|k| fixed[k].map(|v| (self.raster[k].node, (v - free[k]) * (1.0 / dt))))
                 .collect();
         }
-        let node_velocity = |n: u64| node(n).map(|s| s.constrained.unwrap_or(s.own));
+        let node_velocity = |k: usize| Some(fixed[k].unwrap_or(own[k]));
         // The coupling's change of each node velocity. Where the coupler did not act the
         // node goes back to its uncoupled velocity: the part of the push spread there is
         // taken back.
-        let change = |n: u64| Some(node(n).map_or(S::V::default(), |s| s.constrained.unwrap_or(s.free) - s.own));
+        let change = |k: usize| Some(fixed[k].unwrap_or(free[k]) - own[k]);
         let g = &mut state.grains;
-        for (&i, &x0) in self.hybrid.iter().zip(&self.saved) {
+        for (k, (&i, &x0)) in self.hybrid.iter().zip(&self.saved).enumerate() {
             let i = i as usize;
             if flip {
                 // The rest of the coupling force, spread evenly over the step, changes the
                 // velocity by dv and the position by dv dt / 2.
-                let (dv, _) = coupling::interpolate::<S>(grid, kernel, x0, change);
+                let (dv, _) = self.stencils.interpolate(k, change);
                 g.v[i] += dv;
                 g.x[i] += dv * (0.5 * dt);
                 // Its spin is not coupled otherwise: where the material is quasi-static the
@@ -238,14 +230,14 @@ impl<S: Space> CoupledStep<S> {
                 // 0.5 s); where it flows the grain rolls (turning with the material there,
                 // a = 0.5 columns stop at 2/3 of the DEM's runout). I² = γ̇² d / |g| < I_c²,
                 // without a division.
-                let (_, grad) = coupling::interpolate::<S>(grid, kernel, x0, node_velocity);
+                let (_, grad) = self.stencils.interpolate(k, node_velocity);
                 let rate = grad.shear_rate(S::DIM);
                 let d = 2.0 * g.radius[i];
                 if rate * rate * d < self.params.quasi_static * self.params.quasi_static * self.params.gravity {
                     g.omega[i] = grad.spin::<S>();
                 }
             } else {
-                let (v, grad) = coupling::interpolate::<S>(grid, kernel, x0, node_velocity);
+                let (v, grad) = self.stencils.interpolate(k, node_velocity);
                 g.v[i] = v;
                 g.omega[i] = grad.spin::<S>();
                 g.x[i] = x0 + v * dt;

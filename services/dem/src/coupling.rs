@@ -1,10 +1,12 @@
 //! The DEM side of the grid-vs-grid coupling (Yue 2018 §3.5, Alg. 4–6), as plain functions:
 //!
-//! - [`rasterize`] (Alg. 4): the weighted mass (1 − w) m and momentum of the grains in the
-//!   reconciliation zone onto the MPM grid, with the MPM's own shape functions, by node index;
-//! - [`interpolate`] (Alg. 5): a grain's velocity from node velocities (the coupler's where it
-//!   constrained a node, the DEM's own raster velocity elsewhere), with the same weights, and
-//!   the field's [`Gradient`]: its spin ½ ∇ × v and its shear rate. Yue 2018 couples
+//! - [`Stencils`]: the MPM grid nodes around the grains of the reconciliation zone, with the
+//!   MPM's own shape functions, evaluated once per macro-step;
+//! - [`Stencils::rasterize`] (Alg. 4): their weighted mass (1 − w) m and momentum onto those
+//!   nodes, in node order;
+//! - [`Stencils::interpolate`] (Alg. 5): a grain's velocity from node velocities (the
+//!   coupler's where it constrained a node, the DEM's own raster velocity elsewhere), with the
+//!   same weights, and the field's [`Gradient`]: its spin ½ ∇ × v and its shear rate. Yue 2018 couples
 //!   translation only; a hybrid grain whose rotation were left to its contacts would be spun up
 //!   without end in a resting band, since every macro-step moves it back to where the coupling
 //!   puts it while its contacts' tangential springs keep the sliding of the substeps
@@ -25,59 +27,92 @@ pub struct NodeMomentum<S: Space> {
     pub momentum: S::V,
 }
 
-/// Alg. 4: rasterizes grain `k`'s weighted mass `mass[k]` and momentum `mass[k] v[k]` for every
-/// grain with `include(k)`, sorted by node index (the order the coupler merges in). Sums run
-/// grain by grain in storage order, so the result does not depend on threads.
-pub fn rasterize<S: Space>(
-    grid: &Grid,
-    kernel: Kernel,
-    x: &[S::V],
-    v: &[S::V],
-    mass: &[f64],
-    include: impl Fn(usize) -> bool,
-) -> Vec<NodeMomentum<S>> {
-    let items = (0..x.len()).filter(|&k| include(k)).map(|k| (x[k], v[k], mass[k], S::V::default()));
-    rasterize_with_impulse::<S>(grid, kernel, items).0
+/// The MPM grid nodes around a set of points (the hybrid grains' saved positions) with their
+/// weights and weight gradients, evaluated once and used by every transfer of a macro-step:
+/// `nodes` sorted and unique (the raster's nodes), and per point its entries (slot into
+/// `nodes`, weight, gradient), points in the order given.
+#[derive(Clone, Debug, Default)]
+pub struct Stencils<S: Space> {
+    pub nodes: Vec<u64>,
+    entries: Vec<(u32, f64, S::V)>,
+    offsets: Vec<u32>,
 }
 
-/// Alg. 4 over `(position, velocity, weighted mass, impulse)` items: each node's weighted
-/// mass Σ w m, momentum Σ w m v and impulse Σ w J, sorted by node. The contributions are
-/// gathered as a list, sorted by node with a stable sort and summed in item order, so the
-/// sums do not depend on threads or hashing (and no map is built per step).
-pub fn rasterize_with_impulse<S: Space>(
-    grid: &Grid,
-    kernel: Kernel,
-    items: impl Iterator<Item = (S::V, S::V, f64, S::V)>,
-) -> (Vec<NodeMomentum<S>>, Vec<S::V>) {
-    let mut parts: Vec<(u64, f64, S::V, S::V)> = Vec::new();
-    for (x, v, m, impulse) in items {
-        for_each_node::<S>(grid, kernel, x, |node, w, _| {
-            if w > 0.0 {
-                parts.push((node, w * m, v * (w * m), impulse * w));
-            }
-        });
+impl<S: Space> Stencils<S> {
+    /// The stencils of `points` on `grid` with `kernel` (entries of zero weight left out).
+    pub fn build(&mut self, grid: &Grid, kernel: Kernel, points: &[S::V]) {
+        let mut raw: Vec<(u64, f64, S::V)> = Vec::with_capacity(points.len() * 3usize.pow(S::DIM as u32));
+        self.offsets.clear();
+        self.offsets.push(0);
+        for &x in points {
+            for_each_node::<S>(grid, kernel, x, |node, w, grad| {
+                if w > 0.0 {
+                    raw.push((node, w, grad));
+                }
+            });
+            self.offsets.push(raw.len() as u32);
+        }
+        self.nodes.clear();
+        self.nodes.extend(raw.iter().map(|e| e.0));
+        self.nodes.sort_unstable();
+        self.nodes.dedup();
+        let nodes = &self.nodes;
+        self.entries.clear();
+        self.entries.extend(raw.iter().map(|&(node, w, grad)| {
+            let slot = nodes.binary_search(&node).expect("every node was listed");
+            (slot as u32, w, grad)
+        }));
     }
-    parts.sort_by_key(|p| p.0);
-    let mut nodes: Vec<NodeMomentum<S>> = Vec::new();
-    let mut impulses: Vec<S::V> = Vec::new();
-    for (node, m, p, j) in parts {
-        match nodes.last_mut() {
-            Some(last) if last.node == node => {
-                last.mass += m;
-                last.momentum += p;
-                *impulses.last_mut().expect("one per node") += j;
-            }
-            _ => {
-                nodes.push(NodeMomentum {
-                    node,
-                    mass: m,
-                    momentum: p,
-                });
-                impulses.push(j);
+
+    /// Point `k`'s entries: (slot, weight, gradient).
+    pub fn of(&self, k: usize) -> &[(u32, f64, S::V)] {
+        &self.entries[self.offsets[k] as usize..self.offsets[k + 1] as usize]
+    }
+
+    /// Alg. 4 over the points (in order, with `items[k]` = (weighted mass, velocity, impulse)
+    /// of point `k`): per slot Σ w m, Σ w m v and Σ w J, summed point by point in order.
+    pub fn rasterize(&self, items: impl Iterator<Item = (f64, S::V, S::V)>) -> (Vec<NodeMomentum<S>>, Vec<S::V>) {
+        let mut nodes: Vec<NodeMomentum<S>> = self
+            .nodes
+            .iter()
+            .map(|&node| NodeMomentum {
+                node,
+                mass: 0.0,
+                momentum: S::V::default(),
+            })
+            .collect();
+        let mut impulses = vec![S::V::default(); self.nodes.len()];
+        for (k, (m, v, j)) in items.enumerate() {
+            for &(slot, w, _) in self.of(k) {
+                let n = &mut nodes[slot as usize];
+                n.mass += w * m;
+                n.momentum += v * (w * m);
+                impulses[slot as usize] += j * w;
             }
         }
+        (nodes, impulses)
     }
-    (nodes, impulses)
+
+    /// Alg. 5 at point `k` from slot velocities (`None` for a slot without one: its weight
+    /// is left out and the others renormalized, so that a uniform field is kept exactly), and
+    /// the field's [`Gradient`] there (for the spin ½ ∇ × v and the shear rate).
+    pub fn interpolate(&self, k: usize, velocity: impl Fn(usize) -> Option<S::V>) -> (S::V, Gradient) {
+        let (mut v, mut total) = (S::V::default(), 0.0);
+        let mut l = [[0.0; 3]; 3];
+        for &(slot, w, grad) in self.of(k) {
+            if let Some(vn) = velocity(slot as usize) {
+                v += vn * w;
+                total += w;
+                let (va, ga) = (S::to_array(vn), S::to_array(grad));
+                for (a, row) in l.iter_mut().enumerate() {
+                    for (b, e) in row.iter_mut().enumerate() {
+                        *e += va[a] * ga[b];
+                    }
+                }
+            }
+        }
+        (if total > 0.0 { v * (1.0 / total) } else { v }, Gradient(l))
+    }
 }
 
 /// The gradient L[a][b] = ∂v_a/∂x_b of an interpolated velocity field (zero rows and columns
@@ -106,30 +141,6 @@ impl Gradient {
     }
 }
 
-/// Alg. 5: the velocity at `x` interpolated from node velocities, and its gradient there (for
-/// the spin ½ ∇ × v and the shear rate); `velocity(node)` gives a node's velocity (`None` for a
-/// node that carries no grain mass, which gets no weight: the weights of the nodes that do are
-/// renormalized so that a uniform field is kept exactly).
-pub fn interpolate<S: Space>(grid: &Grid, kernel: Kernel, x: S::V, velocity: impl Fn(u64) -> Option<S::V>) -> (S::V, Gradient) {
-    let (mut v, mut total) = (S::V::default(), 0.0);
-    let mut l = [[0.0; 3]; 3];
-    for_each_node::<S>(grid, kernel, x, |node, w, grad| {
-        if w > 0.0
-            && let Some(vn) = velocity(node)
-        {
-            v += vn * w;
-            total += w;
-            let (va, ga) = (S::to_array(vn), S::to_array(grad));
-            for (a, row) in l.iter_mut().enumerate() {
-                for (b, e) in row.iter_mut().enumerate() {
-                    *e += va[a] * ga[b];
-                }
-            }
-        }
-    });
-    (if total > 0.0 { v * (1.0 / total) } else { v }, Gradient(l))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -156,7 +167,10 @@ mod tests {
         let (x, v, m) = grains();
         let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], 0.05, 2);
         for kernel in [Kernel::Bspline2, Kernel::Gimp { half_width: 0.0125 }] {
-            let r = rasterize::<D2>(&grid, kernel, &x, &v, &m, |k| k % 4 != 0);
+            let kept: Vec<usize> = (0..x.len()).filter(|k| k % 4 != 0).collect();
+            let mut st = Stencils::<D2>::default();
+            st.build(&grid, kernel, &kept.iter().map(|&k| x[k]).collect::<Vec<_>>());
+            let (r, _) = st.rasterize(kept.iter().map(|&k| (m[k], v[k], DVec2::ZERO)));
             assert!(r.windows(2).all(|w| w[0].node < w[1].node));
             let mass: f64 = r.iter().map(|n| n.mass).sum();
             let p = r.iter().fold(DVec2::ZERO, |a, n| a + n.momentum);
@@ -183,11 +197,15 @@ mod tests {
         for k in 0..100 {
             let t = k as f64 * 0.618_033_988_7 % 1.0;
             let x = DVec2::new(0.2 + 0.6 * t, 0.2 + 0.6 * ((3.7 * t) % 1.0));
-            let (v, grad) = interpolate::<D2>(&grid, kernel, x, |_| Some(u));
+            let mut st = Stencils::<D2>::default();
+            st.build(&grid, kernel, &[x]);
+            let node = |k: usize| st.nodes[k];
+            let interpolate = |f: &dyn Fn(u64) -> Option<DVec2>| st.interpolate(0, |k| f(node(k)));
+            let (v, grad) = interpolate(&|_| Some(u));
             assert!((v - u).length() < 1e-14 && grad.spin::<D2>().abs() < 1e-12 && grad.shear_rate(2) < 1e-12);
-            let (half, _) = interpolate::<D2>(&grid, kernel, x, |n| (n % 2 == 0).then_some(u));
+            let (half, _) = interpolate(&|n| (n % 2 == 0).then_some(u));
             assert!((half - u).length() < 1e-14);
-            let (linear, grad) = interpolate::<D2>(&grid, kernel, x, |n| Some(at(n) * 2.0));
+            let (linear, grad) = interpolate(&|n| Some(at(n) * 2.0));
             assert!((linear - x * 2.0).length() < 1e-12, "{linear:?} vs {:?}", x * 2.0);
             let (spin, rate) = (grad.spin::<D2>(), grad.shear_rate(2));
             assert!(
@@ -197,7 +215,7 @@ mod tests {
             // A rigid rotation at ω about (0.5, 0.5): v = ω × r, spin ω (the weights reproduce
             // linear fields and their gradients).
             let omega = 3.0;
-            let (rot, grad) = interpolate::<D2>(&grid, kernel, x, |n| {
+            let (rot, grad) = interpolate(&|n| {
                 let r = at(n) - DVec2::splat(0.5);
                 Some(DVec2::new(-omega * r.y, omega * r.x))
             });
@@ -207,7 +225,7 @@ mod tests {
             assert!((spin - omega).abs() < 1e-9 && rate < 1e-9, "spin {spin} vs {omega}, shear {rate}");
             // A simple shear v_x = γ̇ y: shear rate γ̇, spin −γ̇/2.
             let shear = 4.0;
-            let (_, grad) = interpolate::<D2>(&grid, kernel, x, |n| Some(DVec2::new(shear * at(n).y, 0.0)));
+            let (_, grad) = interpolate(&|n| Some(DVec2::new(shear * at(n).y, 0.0)));
             let (spin, rate) = (grad.spin::<D2>(), grad.shear_rate(2));
             assert!(
                 (rate - shear).abs() < 1e-9 && (spin + 0.5 * shear).abs() < 1e-9,
