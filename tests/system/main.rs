@@ -3,6 +3,7 @@
 
 mod bridge;
 mod oracle;
+mod steps;
 
 use grains_system_tests::*;
 use std::time::{Duration, Instant};

@@ -13,13 +13,14 @@ pub mod bridge;
 pub mod outputs;
 pub mod participants;
 mod progress;
+pub mod steps;
 mod supervisor;
 
 use anyhow::{Context, bail};
 use bridge::Bridge;
 use grains_bridge::config::BridgeArgs;
 use grains_protocol::Role;
-use grains_protocol::scene::{self, Scene};
+use grains_protocol::scene::Scene;
 use grains_service::signals::StopFlag;
 use grains_transport::{inproc::InProc, ipc};
 use outputs::{write_atomic, write_summary};
@@ -123,7 +124,10 @@ pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
 /// `grains check`: validates a scene file and the solvers' checks of it, and says what a
 /// run would start.
 pub fn check(path: &Path) -> anyhow::Result<()> {
-    let s = scene::load(path)?;
+    let (s, _, chosen) = steps::load(path, &[])?;
+    if let Some(c) = chosen {
+        println!("{}: {c}", path.display());
+    }
     if s.synthetic.is_none() {
         check_physics(&s)?;
     }
@@ -157,7 +161,12 @@ pub fn new_run_id() -> String {
 
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
-    let (scene, text) = scene::load_with_overrides(&opts.scene_path, &opts.overrides)?;
+    let (scene, text, chosen) = steps::load(&opts.scene_path, &opts.overrides)?;
+    if let Some(c) = chosen
+        && opts.announce
+    {
+        tracing::info!("{c}");
+    }
     let roles = scene.participants();
     if scene.synthetic.is_none() {
         check_physics(&scene)?;

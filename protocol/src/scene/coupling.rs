@@ -5,11 +5,17 @@ use super::errors::{
     Ctx, SceneError, in_range,
 };
 use super::raw::RawCoupling;
+use crate::number;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Coupling {
-    /// DEM substeps per macro-step k (Yue 2018 Alg. 2).
+    /// DEM substeps per macro-step k (Yue 2018 Alg. 2). With [`Coupling::auto`] a placeholder
+    /// (1) until the launcher resolves it.
     pub substeps: u32,
+    /// `substeps = "auto"`: the launcher picks k and the macro-step from the solvers' stable
+    /// steps ([`AutoSteps`]) and writes them into the run's copy of the scene; a participant
+    /// never runs an unresolved scene.
+    pub auto: Option<AutoSteps>,
     /// MPM share w of the mass in the hybrid zone (DEM takes 1 − w).
     pub weight: f64,
     /// Layered zones of a hybrid body (Yue 2018 §4.3), fixed to the material: grains only
@@ -28,6 +34,14 @@ pub struct Coupling {
     /// rolling at a smaller one (early rather than late). 0 never turns
     /// the grains (Yue 2018 couples translation only); without gravity they always roll.
     pub quasi_static: f64,
+}
+
+/// What `coupling.substeps = "auto"` asks for: the DEM step `dem_dt` (the DEM's own stable
+/// step when absent) and the largest macro-step, a multiple of it, that the MPM's stable step
+/// and `run.dt` (then an upper bound) allow.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AutoSteps {
+    pub dem_dt: Option<f64>,
 }
 
 /// How a hybrid grain takes the coupler's node velocities back (Yue 2018 Alg. 5–6).
@@ -49,11 +63,12 @@ pub enum GrainTransfer {
 }
 
 /// `[coupling]`; the zones default to two cells of `cell_size` each.
-pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64) -> Result<Coupling, SceneError> {
+pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt: f64) -> Result<Coupling, SceneError> {
     let band_default = 2.0 * cell_size;
     let Some(c) = raw else {
         return Ok(Coupling {
             substeps: 10,
+            auto: None,
             weight: 0.5,
             discrete_layer: band_default,
             hybrid_band: band_default,
@@ -61,18 +76,43 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64) -> 
             quasi_static: 1e-3,
         });
     };
-    Ok(Coupling {
-        substeps: match &c.substeps {
-            None => 10,
-            Some(k) if (1..=10_000).contains(k.get_ref()) => *k.get_ref(),
-            Some(k) => {
+    let (substeps, auto) = match &c.substeps {
+        None => (10, None),
+        Some(k) => match k.get_ref() {
+            toml::Value::Integer(n) if (1..=10_000).contains(n) => (*n as u32, None),
+            toml::Value::String(w) if w == "auto" => (1, Some(AutoSteps { dem_dt: None })),
+            other => {
                 return Err(ctx.err(
                     Some(k.span()),
                     Some("coupling.substeps"),
-                    format!("must be between 1 and 10000, got {}", k.get_ref()),
+                    format!("must be a whole number between 1 and 10000, or \"auto\", got {other}"),
                 ));
             }
         },
+    };
+    let auto = match (auto, &c.dem_dt) {
+        (Some(_), Some(d)) => Some(AutoSteps {
+            dem_dt: Some(in_range(ctx, d, "coupling.dem_dt", Open(0.0), Bound::None)?),
+        }),
+        // A resolved scene keeps the DEM step it was resolved with: it must be the one run.dt
+        // and the count give.
+        (None, Some(d)) if ((*d.get_ref() * substeps as f64) / dt - 1.0).abs() > 1e-9 => {
+            return Err(ctx.err(
+                Some(d.span()),
+                Some("coupling.dem_dt"),
+                format!(
+                    "with a fixed count the DEM step is run.dt / coupling.substeps = {:.4e}, not {}; dem_dt chooses the DEM step of \
+                     `substeps = \"auto\"`",
+                    dt / substeps as f64,
+                    number(*d.get_ref())
+                ),
+            ));
+        }
+        (auto, _) => auto,
+    };
+    Ok(Coupling {
+        substeps,
+        auto,
         weight: match &c.weight {
             None => 0.5,
             Some(w) => in_range(ctx, w, "coupling.weight", Open(0.0), Open(1.0))?,
@@ -101,4 +141,54 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64) -> 
             Some(i) => in_range(ctx, i, "coupling.quasi_static", Closed(0.0), Bound::None)?,
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{DEM, check_err, edit, line_of};
+    use super::super::{Path, from_str};
+
+    /// The DEM fixture with its column made hybrid, and a [coupling] table.
+    fn hybrid(coupling: &str) -> String {
+        let text = edit(
+            DEM,
+            "damping = 7.0\nfriction = 0.4\n",
+            "damping = 7.0\nfriction = 0.4\n[material.mpm]\nyoung = 2.5e6\npoisson = 0.3\nfriction_angle = 20.0\npacking = 0.8\n",
+        );
+        let text = edit(&text, "model = \"dem\"", "model = \"hybrid\"");
+        let text = edit(
+            &text,
+            "min = [0.0, 0.0]\nmax = [0.05, 0.05]",
+            "min = [0.01, 0.01]\nmax = [0.05, 0.05]",
+        );
+        format!("{text}\n[coupling]\n{coupling}\n")
+    }
+
+    #[test]
+    fn substeps_are_a_count_or_auto_in_a_hybrid_scene() {
+        let s = from_str(&hybrid("substeps = \"auto\"\ndem_dt = 5e-7"), Path::new("h.toml"), 1).unwrap();
+        assert_eq!(s.coupling.auto.and_then(|a| a.dem_dt), Some(5e-7));
+        let s = from_str(&hybrid("substeps = \"auto\""), Path::new("h.toml"), 1).unwrap();
+        assert_eq!(s.coupling.auto.map(|a| a.dem_dt), Some(None));
+        // A resolved scene keeps its dem_dt: run.dt 1e-5 over 20 substeps is 5e-7.
+        let s = from_str(&hybrid("substeps = 20\ndem_dt = 5e-7"), Path::new("h.toml"), 1).unwrap();
+        assert_eq!((s.coupling.substeps, s.coupling.auto), (20, None));
+
+        let text = hybrid("substeps = \"often\"");
+        check_err(
+            &text,
+            Some(line_of(&text, "substeps")),
+            "coupling.substeps",
+            "or \"auto\", got \"often\"",
+        );
+        let text = hybrid("substeps = 10\ndem_dt = 5e-7");
+        check_err(
+            &text,
+            Some(line_of(&text, "dem_dt")),
+            "coupling.dem_dt",
+            "run.dt / coupling.substeps = 1.0000e-6, not 5e-7",
+        );
+        let text = format!("{DEM}\n[coupling]\nsubsteps = \"auto\"\n");
+        check_err(&text, Some(line_of(&text, "substeps")), "coupling.substeps", "has no hybrid body");
+    }
 }

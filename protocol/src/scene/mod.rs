@@ -23,6 +23,7 @@ mod output;
 mod overrides;
 pub mod raw;
 mod run;
+mod steps;
 mod synthetic;
 #[cfg(test)]
 mod testing;
@@ -30,7 +31,7 @@ mod walls;
 
 pub use bodies::{Body, Model, Shape};
 pub use bridge::SceneBridge;
-pub use coupling::{Coupling, GrainTransfer};
+pub use coupling::{AutoSteps, Coupling, GrainTransfer};
 pub use domain::Domain;
 pub use errors::SceneError;
 pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel};
@@ -39,6 +40,7 @@ pub use oracle::{Oracle, OracleKind};
 pub use output::Output;
 pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};
 pub use run::Dimension;
+pub use steps::with_resolved_steps;
 pub use synthetic::{Synthetic, SyntheticContent};
 pub use walls::{Wall, WallShape};
 
@@ -267,7 +269,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
     let materials = materials::validate(ctx, &raw.material)?;
     let bodies = bodies::validate(ctx, dim, &raw.body, &materials)?;
     let walls = walls::validate(ctx, dim, &raw.wall)?;
-    let coupling = coupling::validate(ctx, raw.coupling.as_ref(), domain.cell_size)?;
+    let coupling = coupling::validate(ctx, raw.coupling.as_ref(), domain.cell_size, run.dt)?;
     let mpm = mpm::validate(ctx, raw.mpm.as_ref())?;
     let oracle = oracle::validate(ctx, raw.oracle.as_ref())?;
     let output = output::validate(raw.output.as_ref());
@@ -287,7 +289,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             "a [synthetic] test scene cannot also have [[body]] tables: synthetic rasters never mix with physics".into(),
         ));
     }
-    Ok(Scene {
+    let scene = Scene {
         path: ctx.path.to_path_buf(),
         hash,
         name: run::name(ctx, &raw.run)?,
@@ -307,7 +309,16 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         output,
         bridge,
         synthetic,
-    })
+    };
+    if scene.coupling.auto.is_some() && (scene.synthetic.is_some() || !scene.participants().contains(&Role::Coupler)) {
+        let span = raw.coupling.as_ref().and_then(|c| c.substeps.as_ref()).map(|s| s.span());
+        return Err(ctx.err(
+            span,
+            Some("coupling.substeps"),
+            "\"auto\" picks the DEM and MPM steps of a hybrid scene (a DEM and an MPM coupled); this scene has no hybrid body: give a number".into(),
+        ));
+    }
+    Ok(scene)
 }
 
 #[cfg(test)]

@@ -129,7 +129,9 @@ pub struct RawWall {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawCoupling {
-    pub substeps: Option<Spanned<u32>>,
+    /// A count, or "auto".
+    pub substeps: Option<Spanned<toml::Value>>,
+    pub dem_dt: Option<Spanned<f64>>,
     pub weight: Option<Spanned<f64>>,
     pub discrete_layer: Option<Spanned<f64>>,
     pub hybrid_band: Option<Spanned<f64>>,

@@ -498,6 +498,13 @@ impl<T: Transport> CoupledPorts<T> {
 
 /// Joins the run of `scene` as `role` (admission by the launcher).
 pub fn join<'t, T: Transport>(transport: &'t T, role: Role, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<Session<'t, T>> {
+    if scene.coupling.auto.is_some() {
+        bail!(
+            "{}: coupling.substeps = \"auto\" is resolved by `grains run`, which writes the chosen steps into the run's copy \
+             of the scene (<run dir>/scene.toml): a participant reads that copy",
+            scene.path.display()
+        );
+    }
     Session::join(
         transport,
         role,

@@ -110,6 +110,14 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     Ok(())
 }
 
+/// The largest MPM step the scene allows: [`MAX_CFL`] of the CFL limit h / c of its
+/// material (see [`check`]); `None` without MPM material.
+pub fn stable_step(scene: &Scene) -> Option<f64> {
+    let (_, material) = mpm_material(scene).ok()?;
+    let dim = scene.dim();
+    Some(MAX_CFL * cfl_time_step(&model(material, dim), bulk_density(material), scene.domain.cell_size, dim))
+}
+
 /// How far behind a segment, in cells, grid nodes belong to it: a GIMP point's support reaches
 /// 1.5 cells, so two cells keep a point in front from weighing free nodes behind.
 const SEGMENT_CELLS: f64 = 2.0;
