@@ -25,6 +25,9 @@ pub struct RenderArgs {
     /// What the colour shows.
     #[arg(long, value_enum, default_value_t = Colour::Model)]
     pub colour: Colour,
+    /// The part of the domain to draw, `xmin,ymin,xmax,ymax` [m] (default: the whole domain).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub view: Option<Vec<f64>>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -71,9 +74,14 @@ pub fn render(args: &RenderArgs) -> anyhow::Result<PathBuf> {
     }
     let point_half = 0.5 * scene.domain.cell_size / scene.mpm.points_per_axis as f64;
     let d = &scene.domain;
+    let (min, max) = match args.view.as_deref() {
+        Some(&[x0, y0, x1, y1]) if x1 > x0 && y1 > y0 => ([x0, y0], [x1, y1]),
+        Some(v) => bail!("--view {v:?}: give xmin,ymin,xmax,ymax with xmax > xmin and ymax > ymin"),
+        None => ([d.min[0], d.min[1]], [d.max[0], d.max[1]]),
+    };
     let view = Scene2 {
-        min: [d.min[0], d.min[1]],
-        max: [d.max[0], d.max[1]],
+        min,
+        max,
         grains: grains.map_or(Ok(Vec::new()), |f| material(&f, None))?,
         points: points.map_or(Ok(Vec::new()), |f| material(&f, Some(point_half)))?,
     };
