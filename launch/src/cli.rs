@@ -48,6 +48,9 @@ pub enum Cmd {
     },
     /// Pour and settle a DEM scene's grains; save the packing for scenes to reuse.
     Pack(grains_launch::pack::PackArgs),
+    /// The continuum's friction angle and stiffness of a hybrid scene from a DEM biaxial test
+    /// of its grains; `--write` records them, with their provenance, in the scene.
+    Calibrate(grains_launch::calibrate::CalibrateArgs),
     /// Draw a frame of a run to PNG (grains as disks of their radius, material points as dots).
     Render(grains_launch::render::RenderArgs),
     /// Check a scene file and print what a run of it would start.

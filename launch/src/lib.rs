@@ -7,12 +7,14 @@
 //!   ([`report`]: markdown, checks and charts);
 //! - [`bench`]: `grains bench`, figures measured side by side;
 //! - [`render`]: `grains render`, a picture of a frame;
+//! - [`calibrate`]: `grains calibrate`, the continuum's parameters from a DEM element test;
 //! - [`pack`], [`remote`], [`clock`]: `grains pack`, the remote clients' glue, calendar dates.
 //!
 //! Nothing here depends on what depends on it: `validate` and `bench` use `run`, never the
 //! other way round.
 
 pub mod bench;
+pub mod calibrate;
 pub mod clock;
 pub mod metrics;
 pub mod pack;

@@ -26,6 +26,7 @@ fn main() -> ExitCode {
         Cmd::Steer { run, command, remote } => remote::steer(&remote, &run, &command),
         Cmd::Runs { remote } => remote::list_runs(&remote),
         Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
+        Cmd::Calibrate(args) => grains_launch::calibrate::calibrate(&args).map(|()| 0),
         Cmd::Check { scene } => run::check(&scene).map(|()| 0),
         Cmd::Render(args) => grains_launch::render::render(&args).map(|path| {
             println!("{}", path.display());

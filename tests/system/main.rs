@@ -2,6 +2,7 @@
 //! Build the binaries first (the README's test command does): `cargo build --release --workspace --bins`.
 
 mod bridge;
+mod calibrate;
 mod oracle;
 mod steps;
 

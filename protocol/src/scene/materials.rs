@@ -77,6 +77,8 @@ pub struct MpmMaterial {
     pub cohesion: f64,
     /// Initial packing fraction Φ0: the continuum's density is Φ0 × the material density.
     pub packing: f64,
+    /// Where `friction_angle` and `young` come from (`grains calibrate --write` writes it).
+    pub calibration: Option<String>,
 }
 
 pub(super) fn validate(ctx: &Ctx, raw: &[RawMaterial]) -> Result<Vec<Material>, SceneError> {
@@ -150,6 +152,7 @@ fn mpm(ctx: &Ctx, c: &RawMpmMaterial, f: &dyn Fn(&str) -> String) -> Result<MpmM
         friction_angle: in_range(ctx, &c.friction_angle, &f("friction_angle"), Closed(0.0), Open(90.0))?,
         cohesion: non_negative(ctx, &c.cohesion, &f("cohesion"))?,
         packing: in_range(ctx, &c.packing, &f("packing"), Open(0.0), Closed(1.0))?,
+        calibration: c.calibration.as_ref().map(|s| s.get_ref().clone()),
     })
 }
 

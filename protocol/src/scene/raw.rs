@@ -80,6 +80,7 @@ pub struct RawMpmMaterial {
     pub packing_critical: Option<Spanned<f64>>,
     pub chi: Option<Spanned<f64>>,
     pub xi: Option<Spanned<f64>>,
+    pub calibration: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]

@@ -15,7 +15,8 @@ pub fn dem_dt(scene: &Scene) -> f64 {
     scene.dt / scene.coupling.substeps as f64
 }
 
-fn contact_params(m: &DemMaterial) -> ContactParams {
+/// The DEM library's contact parameters of a scene material.
+pub fn contact_params(m: &DemMaterial) -> ContactParams {
     ContactParams {
         stiffness_normal: m.stiffness_normal,
         stiffness_tangential: m.stiffness_tangential,

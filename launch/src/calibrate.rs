@@ -1,0 +1,549 @@
+//! `grains calibrate`: the continuum's parameters of a hybrid scene from a DEM element test of
+//! its own grains, not from the case it is then compared with (Yue 2018 §3.3 tunes the
+//! continuum to the DEM; Chen 2021 §2.2 calibrates on DEM element tests).
+//!
+//! The test is a plane-strain biaxial compression of the scene's grains (2D disks; 3D is not
+//! done yet): a jittered lattice of `--grains` grains in a box of four frictionless walls,
+//! no gravity, consolidated to the confining pressure p0 (servo-controlled walls), then
+//! shortened at a constant axial strain rate with the lateral stress held at p0. The axial
+//! rate keeps the inertial number I = ε̇ d √(ρ / p0) at `--inertial` (quasi-static: the
+//! measured friction does not depend on the rate below about 1e-3, GDR MiDi 2004).
+//!
+//! In 2D the Mohr–Coulomb friction angle φ of the principal stresses σ1 ≥ σ3 (compression
+//! positive) is sin φ = (σ1 − σ3) / (σ1 + σ3). The continuum of grains is Drucker–Prager with
+//! the plane Mohr–Coulomb cone (‖dev τ‖ = √2 sin φ p, `DruckerPragerYue::new`), perfectly
+//! plastic, so it takes the critical-state angle: the mean over axial strains 15–30 %, after the
+//! peak. Its Young's modulus is the initial one: the deviator's least-squares slope over the
+//! first 0.1 % of axial strain, E = (1 − ν²) Δσ1 / Δε1 with the scene's ν (Yue 2018 §3.3:
+//! ν = 0.3); the secant modulus at half the peak (E50) is printed beside it. (An isotropic
+//! unloading from 1.1 p0 to 0.9 p0 was tried for a bulk modulus: the sample's creep at p0 is
+//! of the same size as the elastic volume change, and the modulus came out negative.)
+//!
+//! `--write` records the result in the scene file: `friction_angle`, `young` and a
+//! `calibration` line saying where they come from, in the scene's `[material.mpm]`.
+
+use anyhow::{Context, bail};
+use grains_dem::packing::lattice_in_box;
+use grains_dem::pipeline::DemPipeline;
+use grains_dem::space::{D2, Space};
+use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall, WallShape};
+use grains_grid::rng::{Rng, radius};
+use grains_protocol::scene::{self, Dimension, Model, Scene};
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct CalibrateArgs {
+    /// A hybrid scene: its first hybrid body's material is calibrated.
+    pub scene: PathBuf,
+    /// Grains in the sample (about twice as tall as wide).
+    #[arg(long, default_value_t = 2400)]
+    pub grains: usize,
+    /// Confining pressure p0 [Pa] (default: the weight of half the hybrid body's height,
+    /// ρ_bulk |g| H / 2, the stress level the continuum works at).
+    #[arg(long)]
+    pub pressure: Option<f64>,
+    /// Inertial number of the axial shortening.
+    #[arg(long, default_value_t = 1e-3)]
+    pub inertial: f64,
+    /// Seed of the sample's radii and lattice jitter.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write the result into the scene file's `[material.mpm]`.
+    #[arg(long)]
+    pub write: bool,
+}
+
+/// One record of the test.
+#[derive(Clone, Copy, Debug)]
+pub struct Record {
+    /// Axial strain (shortening positive).
+    pub axial: f64,
+    /// Volumetric strain (compaction positive).
+    pub volumetric: f64,
+    pub sigma1: f64,
+    pub sigma3: f64,
+}
+
+impl Record {
+    pub fn sin_phi(&self) -> f64 {
+        (self.sigma1 - self.sigma3) / (self.sigma1 + self.sigma3)
+    }
+}
+
+/// What a biaxial test gives.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    pub records: Vec<Record>,
+    pub pressure: f64,
+    pub grains: usize,
+    pub strain_rate: f64,
+    /// Peak and critical-state (mean over 15–30 % axial strain) friction angles [degrees].
+    pub peak: f64,
+    pub critical: f64,
+    /// The spread (standard deviation) of φ over the critical-state window [degrees].
+    pub critical_spread: f64,
+    /// Plane-strain secant modulus at half the peak deviator Δσ1/Δε1 [Pa].
+    pub e50_plane: f64,
+    /// Plane-strain initial modulus: the deviator's slope over the first 0.1 % of axial
+    /// strain [Pa].
+    pub e0_plane: f64,
+    /// The mean lateral stress over the critical-state window, over p0 (the servo's hold).
+    pub lateral_mean: f64,
+}
+
+impl Calibration {
+    fn young_of(&self, plane: f64, poisson: f64) -> f64 {
+        (1.0 - poisson * poisson) * plane
+    }
+
+    /// Young's modulus of the continuum for Poisson's ratio ν: the initial one, E = (1 − ν²)
+    /// E0_plane (plane strain with σ3 held: dσ1/dε1 = E / (1 − ν²)). The continuum's elasticity
+    /// is the packing's small-strain response (Yue 2018 §3.3 takes κ from the contact
+    /// stiffness), its plasticity Drucker–Prager's.
+    pub fn young(&self, poisson: f64) -> f64 {
+        self.young_of(self.e0_plane, poisson)
+    }
+}
+
+/// The material of a scene to calibrate: its first hybrid body's.
+fn hybrid_material(scene: &Scene) -> anyhow::Result<usize> {
+    let Some(b) = scene.bodies.iter().find(|b| b.model == Model::Hybrid) else {
+        bail!(crate::run::BadInput(format!(
+            "{}: grains calibrate needs a scene with a hybrid body (its DEM grains set the continuum's parameters)",
+            scene.path.display()
+        )));
+    };
+    let m = &scene.materials[b.material];
+    if m.dem.is_none() || m.mpm.is_none() {
+        bail!(crate::run::BadInput(format!(
+            "{}: material `{}` needs both [material.dem] and [material.mpm]",
+            scene.path.display(),
+            m.name
+        )));
+    }
+    Ok(b.material)
+}
+
+/// The default confining pressure: the weight of half the hybrid body's height.
+fn default_pressure(scene: &Scene, material: usize) -> f64 {
+    let m = &scene.materials[material];
+    let packing = m.mpm.as_ref().map_or(1.0, |p| p.packing);
+    let g = scene.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let height = scene
+        .bodies
+        .iter()
+        .filter(|b| b.model == Model::Hybrid)
+        .map(|b| match b.shape {
+            grains_protocol::scene::Shape::Box { min, max } => max[1] - min[1],
+            grains_protocol::scene::Shape::Ball { radius, .. } => 2.0 * radius,
+        })
+        .fold(0.0, f64::max);
+    m.density * packing * g * 0.5 * height
+}
+
+/// Runs the biaxial test of material `material` of `scene`.
+pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, inertial: f64, seed: u64) -> anyhow::Result<Calibration> {
+    if scene.dimension != Dimension::Two {
+        bail!(crate::run::BadInput(
+            "grains calibrate runs the 2D biaxial test; the 3D triaxial test is not built yet".into()
+        ));
+    }
+    let mat = &scene.materials[material];
+    let dem = mat.dem.as_ref().context("a DEM material")?;
+    let params = grains_dem_service::setup::contact_params(dem);
+    // Frictionless walls: the box's faces are principal planes.
+    let d = 2.0 * dem.radius;
+    // A lattice of about `grains` sites, twice as tall as wide, spacing just over the largest
+    // diameter so that nothing overlaps at the start.
+    let r_max = dem.radius + 2.0 * dem.radius_std;
+    let spacing = 2.04 * r_max;
+    let cols = ((grains as f64 / 2.0 / (3f64.sqrt() / 2.0)).sqrt()).round().max(4.0);
+    let width = cols * spacing + 2.0 * r_max;
+    let height = 2.0 * width;
+    let mut rng = Rng::new(seed);
+    let sites = lattice_in_box::<D2>([0.0; 3], [width, height, 0.0], spacing, 1.01 * r_max, 0.01 * dem.radius, &mut rng);
+    let mut state = DemState::<D2> {
+        grains: Grains::default(),
+        walls: vec![
+            Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([1.0, 0.0, 0.0]), 0.0),
+            Wall::plane(D2::from_array([width, 0.0, 0.0]), D2::from_array([-1.0, 0.0, 0.0]), 0.0),
+            Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([0.0, 1.0, 0.0]), 0.0),
+            Wall::plane(D2::from_array([0.0, height, 0.0]), D2::from_array([0.0, -1.0, 0.0]), 0.0),
+        ],
+        params: DemParams {
+            materials: vec![params],
+            gravity: D2::from_array([0.0; 3]),
+            domain: Domain {
+                min: [-width, -height, 0.0],
+                max: [2.0 * width, 2.0 * height, 0.0],
+                periodic: [false; 3],
+            },
+            skin: 0.1 * d,
+        },
+        time: 0.0,
+    };
+    for (k, &x) in sites.iter().enumerate() {
+        let r = radius(&mut rng, dem.radius, dem.radius_std);
+        state.grains.push(k as u64, x, r, Grains::<D2>::mass_of(r, mat.density), 0);
+    }
+    let n = state.grains.len();
+    let (safe, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
+    let dt = safe;
+    let mut pipe = DemPipeline::<D2>::new(scene.threads as usize)?;
+    // The axial strain rate of inertial number I: ε̇ = I / (d √(ρ / p0)).
+    let rate = inertial / (d * (mat.density / pressure).sqrt());
+    // The stresses on the walls averaged over `n` steps (a single step's load rattles with the
+    // grains' vibrations), and the box's width and height after them.
+    let run = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, n: usize| -> (f64, f64, f64, f64) {
+        let (mut fx, mut fy) = (0.0, 0.0);
+        for _ in 0..n {
+            pipe.run(st, dt, 1);
+            fx += 0.5 * (st.walls[0].load[0].abs() + st.walls[1].load[0].abs());
+            fy += 0.5 * (st.walls[2].load[1].abs() + st.walls[3].load[1].abs());
+        }
+        let w = wall_at(&st.walls[1], 0) - wall_at(&st.walls[0], 0);
+        let h = wall_at(&st.walls[3], 1) - wall_at(&st.walls[2], 1);
+        // Loads are the grains' push on each wall [N/m]; stress = load / length [Pa].
+        (fx / n as f64 / h, fy / n as f64 / w, w, h)
+    };
+    // The walls are servo-controlled every SERVO_STEPS steps: a wall moves at
+    // GAIN × 10 ε̇ L times the relative stress error (clamped to ±1), closing while the
+    // stress is below the target and opening above it (a larger gain rings: the stress on the
+    // walls swings from one interval to the next).
+    const SERVO_STEPS: usize = 50;
+    const FINE: f64 = 0.0002;
+    const GAIN: f64 = 0.1;
+    let servo = |st: &mut DemState<D2>, wall: usize, axis: usize, measured: f64, target: f64, length: f64| {
+        let error = ((target - measured) / target).clamp(-1.0, 1.0);
+        let mut v = [0.0; 3];
+        v[axis] = -error * GAIN * 10.0 * rate * length;
+        st.walls[wall].velocity = D2::from_array(v);
+    };
+    // Isotropic consolidation to `target`: the right and top walls move until both sides hold
+    // it within 2 % and the grains are nearly at rest (at most 2 s of simulated time); the
+    // box's width and height then.
+    let settle = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, target: f64| -> anyhow::Result<(f64, f64)> {
+        for _ in 0..((2.0 / dt) as usize / SERVO_STEPS) {
+            let (sxx, syy, w, h) = run(st, pipe, SERVO_STEPS);
+            // Preparation only: the grains' velocities are damped (2 % per servo interval) so
+            // that the sample comes to rest; the shear that is measured runs without it.
+            st.grains.v.iter_mut().for_each(|v| *v *= 0.98);
+            st.grains.omega.iter_mut().for_each(|w| *w *= 0.98);
+            let ke = DemPipeline::kinetic_energy(st);
+            tracing::trace!("consolidation to {target:.1} Pa: σxx {sxx:.1} σyy {syy:.1} Pa, w {w:.5} h {h:.5} m, ke {ke:.3e} J");
+            if (sxx / target - 1.0).abs() < 0.02 && (syy / target - 1.0).abs() < 0.02 && ke < 1e-5 * target * w * h {
+                st.walls.iter_mut().for_each(|w| w.velocity = D2::from_array([0.0; 3]));
+                return Ok((w, h));
+            }
+            servo(st, 1, 0, sxx, target, w);
+            servo(st, 3, 1, syy, target, h);
+        }
+        bail!("the sample did not settle at {target:.1} Pa within 2 s: stiffness, pressure or grain count out of reach")
+    };
+    settle(&mut state, &mut pipe, pressure)?;
+    // Shear: the top wall moves down at ε̇ H0, the right wall holds σ3 = p0, to 30 % of axial
+    // strain.
+    let (_, _, w0, h0) = run(&mut state, &mut pipe, 1);
+    let mut records = Vec::new();
+    // Records every 0.02 % of axial strain up to 0.5 % (the start), then every 0.25 %.
+    let mut next = FINE;
+    let mut integral = 0.0;
+    while next <= 0.3 + 1e-9 {
+        // The top wall comes up to speed over the first 0.1 % of strain (a sudden start sends a
+        // stress wave through the sample).
+        let axial_now = 1.0 - (wall_at(&state.walls[3], 1) - wall_at(&state.walls[2], 1)) / h0;
+        let ramp = (axial_now / 0.001).clamp(0.05, 1.0);
+        state.walls[3].velocity = D2::from_array([0.0, -ramp * rate * h0, 0.0]);
+        let (sxx, syy, w, h) = run(&mut state, &mut pipe, SERVO_STEPS);
+        if let Some(id) = DemPipeline::first_non_finite(&state) {
+            bail!("grain {id} is not finite: the biaxial test blew up");
+        }
+        // The right wall opens as a sample of constant volume would (ε̇x = −ε̇y), corrected by
+        // the lateral stress error (dilation opens it further, contraction less). The
+        // correction's gain is low: the stress answers a wall's move only after a wave has
+        // crossed the sample (hundreds of steps), and a quicker servo rings.
+        // An integral term takes out the lasting error that dilation leaves.
+        let error = sxx / pressure - 1.0;
+        integral = (integral + 0.02 * error).clamp(-1.0, 1.0);
+        let correction = (0.5 * error + integral).clamp(-1.0, 2.0);
+        state.walls[1].velocity = D2::from_array([ramp * rate * w * (1.0 + correction), 0.0, 0.0]);
+        let axial = 1.0 - h / h0;
+        if axial >= next {
+            records.push(Record {
+                axial,
+                volumetric: 1.0 - (w * h) / (w0 * h0),
+                sigma1: syy,
+                sigma3: sxx,
+            });
+            next += if next < 0.005 { FINE } else { 0.0025 };
+        }
+    }
+    let angle = |s: f64| s.asin().to_degrees();
+    let peak = records.iter().map(Record::sin_phi).fold(f64::MIN, f64::max);
+    let window: Vec<f64> = records
+        .iter()
+        .filter(|r| (0.15..=0.3).contains(&r.axial))
+        .map(|r| angle(r.sin_phi()))
+        .collect();
+    let critical = window.iter().sum::<f64>() / window.len() as f64;
+    let lateral: Vec<f64> = records
+        .iter()
+        .filter(|r| (0.15..=0.3).contains(&r.axial))
+        .map(|r| r.sigma3 / pressure)
+        .collect();
+    let lateral_mean = lateral.iter().sum::<f64>() / lateral.len() as f64;
+    let critical_spread = (window.iter().map(|a| (a - critical).powi(2)).sum::<f64>() / window.len() as f64).sqrt();
+    // E50: the first record past half the peak deviator, secant from the start.
+    let q_peak = records.iter().map(|r| r.sigma1 - r.sigma3).fold(f64::MIN, f64::max);
+    let half = records
+        .iter()
+        .find(|r| r.sigma1 - r.sigma3 >= 0.5 * q_peak)
+        .context("no record reached half the peak")?;
+    let e50_plane = (half.sigma1 - pressure) / half.axial.max(f64::MIN_POSITIVE);
+    // E0: the least-squares slope of the deviator σ1 − σ3 against the axial strain over the
+    // first 0.1 %, through the origin (the start is isotropic).
+    let first: Vec<&Record> = records.iter().filter(|r| r.axial <= 0.001 + 1e-12).collect();
+    let e0_plane = first.iter().map(|r| (r.sigma1 - r.sigma3) * r.axial).sum::<f64>()
+        / first.iter().map(|r| r.axial * r.axial).sum::<f64>().max(f64::MIN_POSITIVE);
+    Ok(Calibration {
+        records,
+        pressure,
+        grains: n,
+        strain_rate: rate,
+        peak: angle(peak),
+        critical,
+        critical_spread,
+        e50_plane,
+        e0_plane,
+        lateral_mean,
+    })
+}
+
+/// A plane wall's position along `axis`.
+fn wall_at<S: Space>(w: &Wall<S>, axis: usize) -> f64 {
+    match w.shape {
+        WallShape::Plane { point, .. } => S::to_array(point)[axis],
+        _ => 0.0,
+    }
+}
+
+/// What `--write` puts in the scene: the command that reproduces the numbers (its options, as
+/// [`CalibrateOptions::parse`] reads them back) and what they are.
+pub fn provenance(c: &Calibration, o: &CalibrateOptions) -> String {
+    format!(
+        "grains calibrate {}: DEM biaxial test of this material ({} grains); friction_angle = critical state (mean over axial \
+         strain 15-30 %, peak {:.1} deg), young = initial slope of the loading (first 0.1 % of axial strain, plane strain)",
+        o, c.grains, c.peak
+    )
+}
+
+/// The options of a calibration that decide its result.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CalibrateOptions {
+    pub grains: usize,
+    pub seed: u64,
+    pub pressure: f64,
+    pub inertial: f64,
+}
+
+impl std::fmt::Display for CalibrateOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "--grains {} --seed {} --pressure {} --inertial {:e}",
+            self.grains, self.seed, self.pressure, self.inertial
+        )
+    }
+}
+
+impl CalibrateOptions {
+    /// The options written at the head of a provenance line (`grains calibrate --grains N
+    /// --seed S --pressure P --inertial I: ...`).
+    pub fn parse(provenance: &str) -> Option<CalibrateOptions> {
+        let flags = provenance.strip_prefix("grains calibrate ")?.split(':').next()?;
+        let words: Vec<&str> = flags.split_whitespace().collect();
+        let value = |name: &str| words.iter().position(|w| *w == name).and_then(|k| words.get(k + 1));
+        Some(CalibrateOptions {
+            grains: value("--grains")?.parse().ok()?,
+            seed: value("--seed")?.parse().ok()?,
+            pressure: value("--pressure")?.parse().ok()?,
+            inertial: value("--inertial")?.parse().ok()?,
+        })
+    }
+}
+
+/// Calibrates the hybrid material of `scene` with `o`: (material index, result).
+pub fn run_for(scene: &Scene, o: &CalibrateOptions) -> anyhow::Result<(usize, Calibration)> {
+    let material = hybrid_material(scene)?;
+    Ok((material, biaxial(scene, material, o.grains, o.pressure, o.inertial, o.seed)?))
+}
+
+pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let scene = scene::load(&args.scene)?;
+    let material = hybrid_material(&scene)?;
+    let options = CalibrateOptions {
+        grains: args.grains,
+        seed: args.seed,
+        pressure: args.pressure.unwrap_or_else(|| default_pressure(&scene, material)),
+        inertial: args.inertial,
+    };
+    let mpm = scene.materials[material].mpm.as_ref().expect("checked");
+    tracing::info!("calibrate: biaxial test of `{}`: {options}", scene.materials[material].name);
+    let (_, c) = run_for(&scene, &options)?;
+    println!("axial_strain,volumetric_strain,sigma1_Pa,sigma3_Pa,phi_deg");
+    for r in &c.records {
+        println!(
+            "{:.4},{:.5},{:.2},{:.2},{:.2}",
+            r.axial,
+            r.volumetric,
+            r.sigma1,
+            r.sigma3,
+            r.sin_phi().asin().to_degrees()
+        );
+    }
+    let young = c.young(mpm.poisson);
+    println!(
+        "# {} grains at p0 = {:.1} Pa, axial rate {:.3e} 1/s: peak {:.2} deg, critical state {:.2} deg (sd {:.2}); \
+         E = {young:.4e} Pa from the initial slope {:.4e} Pa (plane strain, nu = {}); secant E50 = {:.4e} Pa; \
+         mean sigma3 over the window {:.3} p0",
+        c.grains,
+        c.pressure,
+        c.strain_rate,
+        c.peak,
+        c.critical,
+        c.critical_spread,
+        c.e0_plane,
+        mpm.poisson,
+        c.young_of(c.e50_plane, mpm.poisson),
+        c.lateral_mean,
+    );
+    if args.write {
+        let text = std::fs::read_to_string(&args.scene)?;
+        let name = &scene.materials[material].name;
+        let edited = write_calibration(&text, name, c.critical, young, &provenance(&c, &options))
+            .with_context(|| format!("{}: writing the calibration", args.scene.display()))?;
+        crate::run::outputs::write_atomic(&args.scene, edited.as_bytes())?;
+        tracing::info!(
+            "calibrate: wrote friction_angle, young and calibration into {}",
+            args.scene.display()
+        );
+    }
+    Ok(())
+}
+
+/// The scene text with `friction_angle`, `young` and `calibration` of the `[material.mpm]` table
+/// of material `name` set (lines replaced in place, or added at the table's end); the rest of
+/// the file, comments included, as it was.
+pub fn write_calibration(text: &str, name: &str, friction_angle: f64, young: f64, provenance: &str) -> anyhow::Result<String> {
+    let lines: Vec<&str> = text.lines().collect();
+    let header = |l: &str| l.trim_start().starts_with('[');
+    // The [[material]] whose name is `name`, then its [material.mpm].
+    let mut start = None;
+    for (k, l) in lines.iter().enumerate() {
+        if l.trim() == "[[material]]" {
+            let table_end = (k + 1..lines.len()).find(|&j| header(lines[j])).unwrap_or(lines.len());
+            if lines[k + 1..table_end]
+                .iter()
+                .any(|l| l.split('#').next().unwrap_or("").replace(' ', "") == format!("name=\"{name}\""))
+            {
+                start = Some(k);
+                break;
+            }
+        }
+    }
+    let start = start.with_context(|| format!("no [[material]] named {name:?}"))?;
+    let mpm = (start + 1..lines.len())
+        .take_while(|&j| lines[j].trim() != "[[material]]")
+        .find(|&j| lines[j].trim() == "[material.mpm]")
+        .with_context(|| format!("material {name:?} has no [material.mpm] table"))?;
+    let end = (mpm + 1..lines.len()).find(|&j| header(lines[j])).unwrap_or(lines.len());
+    let values = [
+        ("friction_angle", format!("{friction_angle:.2}")),
+        ("young", format!("{young:.4e}")),
+        ("calibration", format!("{provenance:?}")),
+    ];
+    let mut out: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    let mut missing = Vec::new();
+    for (key, value) in &values {
+        let at = (mpm + 1..end).find(|&j| {
+            let l = lines[j].trim_start();
+            l.starts_with(key) && l[key.len()..].trim_start().starts_with('=')
+        });
+        match at {
+            Some(j) => out[j] = format!("{key} = {value}"),
+            None => missing.push(format!("{key} = {value}")),
+        }
+    }
+    // New keys go after the table's last key line (before blank lines and comments that lead
+    // into the next table).
+    let last_key = (mpm + 1..end)
+        .rev()
+        .find(|&j| {
+            let l = lines[j].trim();
+            !l.is_empty() && !l.starts_with('#')
+        })
+        .unwrap_or(mpm);
+    for (k, l) in missing.into_iter().enumerate() {
+        out.insert(last_key + 1 + k, l);
+    }
+    let mut s = out.join("\n");
+    if text.ends_with('\n') {
+        s.push('\n');
+    }
+    Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn provenance_gives_back_its_options() {
+        let o = CalibrateOptions {
+            grains: 2400,
+            seed: 3,
+            pressure: 812.5,
+            inertial: 1e-3,
+        };
+        let c = Calibration {
+            records: Vec::new(),
+            pressure: 812.5,
+            grains: 3219,
+            strain_rate: 0.5,
+            peak: 17.0,
+            critical: 14.0,
+            critical_spread: 1.0,
+            e50_plane: 1e5,
+            e0_plane: 5e5,
+            lateral_mean: 1.0,
+        };
+        let p = provenance(&c, &o);
+        assert!(
+            p.starts_with("grains calibrate --grains 2400 --seed 3 --pressure 812.5 --inertial 1e-3: "),
+            "{p}"
+        );
+        assert_eq!(CalibrateOptions::parse(&p), Some(o));
+        assert_eq!(CalibrateOptions::parse("hand-set"), None);
+    }
+
+    #[test]
+    fn the_calibration_replaces_values_in_their_table_and_keeps_the_rest() {
+        let text = "# head\n[[material]]\nname = \"sand\"\n[material.mpm]\nyoung = 1e6\n# why\nfriction_angle = 30.0 # hand-set\n\n[[material]]\nname = \"glass\"\n[material.mpm]\nyoung = 2.5e6\npacking = 0.8\n\n# next\n[[body]]\n";
+        let out = write_calibration(text, "glass", 21.456, 1.25e6, "test").unwrap();
+        assert!(
+            out.starts_with(
+                "# head\n[[material]]\nname = \"sand\"\n[material.mpm]\nyoung = 1e6\n# why\nfriction_angle = 30.0 # hand-set\n"
+            )
+        );
+        assert!(
+            out.contains("name = \"glass\"\n[material.mpm]\nyoung = 1.2500e6\npacking = 0.8\nfriction_angle = 21.46\ncalibration = \"test\"\n\n# next\n[[body]]\n"),
+            "{out}"
+        );
+        let again = write_calibration(&out, "glass", 20.0, 1e6, "again").unwrap();
+        assert!(
+            again.contains("young = 1.0000e6\npacking = 0.8\nfriction_angle = 20.00\ncalibration = \"again\"\n"),
+            "{again}"
+        );
+        assert!(write_calibration(text, "clay", 20.0, 1e6, "x").is_err());
+    }
+}
