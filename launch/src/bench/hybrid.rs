@@ -1,131 +1,230 @@
-//! `grains bench hybrid`: wall time of the hybrid column collapse against the pure DEM one at
-//! the scale of 100,000 grains, and what the separate processes cost on the hybrid run.
+//! `grains bench hybrid`: the hybrid column collapse against the pure DEM one, from the same
+//! settled packing of about 100,000 grains, with the same grains, contact law and DEM step
+//! (5e-7 s) in both: wall time per simulated second, the speed-up, and how far the front has
+//! run in each at the end of the window.
 //!
-//! Both scenes of `scenes/` are enlarged by overrides to a column of `--width` × 0.4 m (about
-//! 100,000 grains of 1 mm at the default 0.3 m) in a domain of 0.5 × 0.45 m and run for
-//! `--duration` of simulated time without frames: the DEM (100 substeps of 5e-7 s per
-//! macro-step), then the hybrid with each `--substeps` k (MPM step k × 5e-7 s), the first k
-//! also in-process. The figures are whole-run wall times from `metrics.csv` (`wall_s`).
+//! The packing is `scenes/column_packing_2d.toml` widened to `--width` and poured to 0.4 m
+//! by `grains pack` (with a DEM step of 5e-6 s: only the pour, not the measured runs; kept in
+//! `--out` and reused). The DEM run is `column_collapse_2d.toml` on it (two threads: the whole
+//! machine); each hybrid run is `column_collapse_hybrid_2d.toml` on it with `--cells` MPM cells,
+//! `coupling.substeps = "auto"` (DEM step 5e-7 s, the MPM at its stable step) and one thread
+//! per solver (the DEM and the MPM share the machine's two cores), with fixed layered zones
+//! and, with `--surface`, also the surface oracle. Every run writes one frame at the end; the
+//! front is validate's (1-mm bins, the first whose three-bin mean height is under 3.5 mm).
 
 use crate::run::{RunOptions, Status, TransportKind, run};
-use anyhow::bail;
+use crate::validate::deposit::{BIN, FRONT_HEIGHT, deposit, front, profile};
+use anyhow::{Context, bail};
 use grains_protocol::Role;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct HybridArgs {
-    /// Directory of column_collapse_2d.toml and column_collapse_hybrid_2d.toml.
+    /// Directory of the column scenes.
     #[arg(long, default_value = "scenes")]
     pub scenes: PathBuf,
     /// Column width [m] (height 0.4 m): 0.3 gives about 100,000 grains.
     #[arg(long, default_value_t = 0.3)]
     pub width: f64,
     /// Simulated time of every run [s].
-    #[arg(long, default_value_t = 0.005)]
-    pub duration: f64,
-    /// DEM substeps per MPM step of the hybrid runs.
-    #[arg(long, value_delimiter = ',', default_values_t = [10u32, 20, 40])]
-    pub substeps: Vec<u32>,
-    /// Where the runs and the result table go.
+    #[arg(long, default_value_t = 0.1)]
+    pub window: f64,
+    /// MPM cell sizes of the hybrid runs [m].
+    #[arg(long, value_delimiter = ',', default_values_t = [0.004])]
+    pub cells: Vec<f64>,
+    /// Also run the hybrid with the surface oracle (Yue 2018 §4, every 1 ms).
+    #[arg(long)]
+    pub surface: bool,
+    /// Extra `--set` overrides of the hybrid runs.
+    #[arg(long = "set-hybrid", value_name = "KEY=VALUE")]
+    pub hybrid_overrides: Vec<String>,
+    /// Where the packing, the runs and the result table go.
     #[arg(long, default_value = "out/bench/hybrid")]
     pub out: PathBuf,
 }
+
+/// The DEM step of every measured run [s] (the column scenes').
+const DEM_DT: f64 = 5e-7;
+/// Column height [m] and the bottom of the column (over the glued floor row) [m].
+const HEIGHT: f64 = 0.4;
+const BOTTOM: f64 = 0.0015;
 
 struct Row {
     label: String,
     grains: u64,
     points: u64,
+    substeps: u32,
     wall: f64,
+    front: f64,
+    dem_ms: f64,
+    mpm_ms: f64,
 }
 
-/// (first row's grains, first row's points, last row's wall_s) of a run.
-fn read(dir: &Path) -> anyhow::Result<(u64, u64, f64)> {
-    let t = crate::metrics::MetricsTable::read(dir)?;
-    let first = |role| -> anyhow::Result<u64> { Ok(t.participant(role, "items")?.and_then(|v| v.first().copied()).unwrap_or(0.0) as u64) };
-    Ok((first(Role::Dem)?, first(Role::Mpm)?, t.last("wall_s")?))
+/// The settled packing of the bench's column, poured once.
+fn packing(args: &HybridArgs) -> anyhow::Result<PathBuf> {
+    let path = std::path::absolute(args.out.join(format!("packing_{:.0}mm.data", args.width * 1e3)))?;
+    if path.exists() {
+        return Ok(path);
+    }
+    // A lattice settles to about 0.78 of its height.
+    let pour_top = BOTTOM + HEIGHT / 0.76;
+    let settle = (2.0 * pour_top / 9.81).sqrt() + 0.25;
+    tracing::info!("bench hybrid: pouring the {} m column (grains pack, once)", args.width);
+    crate::pack::pack(&crate::pack::PackArgs {
+        scene: args.scenes.join("column_packing_2d.toml"),
+        out: path.clone(),
+        friction: None,
+        overrides: vec![
+            format!("body.0.max=[{},{pour_top}]", args.width),
+            format!("body.1.max=[{},0.0013]", args.width),
+            format!("wall.2.point=[{},0.0]", args.width),
+            format!("domain.max=[{},{}]", args.width, pour_top + 0.01),
+            "run.dt=5e-5".into(),
+            "coupling.substeps=10".into(),
+            format!("run.duration={settle:.2}"),
+        ],
+    })?;
+    Ok(path)
 }
 
-fn one(args: &HybridArgs, scene: &str, transport: TransportKind, extra: &[String]) -> anyhow::Result<(u64, u64, f64)> {
-    let mut overrides = vec![
-        format!("body.0.max=[{},0.4015]", args.width),
-        "domain.max=[0.5,0.45]".to_string(),
-        format!("run.duration={}", args.duration),
-        "output.frames_every=0".to_string(),
-    ];
-    overrides.extend(extra.iter().cloned());
+/// The overrides both models share: the column cut from the packing, the domain, the window,
+/// one frame at the end.
+fn common(args: &HybridArgs, packing: &Path) -> Vec<String> {
+    vec![
+        format!("body.0.max=[{},{}]", args.width, BOTTOM + HEIGHT),
+        format!("body.0.packing={:?}", packing.display().to_string()),
+        format!("body.1.max=[{},0.0013]", args.width + 0.3),
+        format!("domain.max=[{},{}]", args.width + 0.3, HEIGHT + 0.05),
+        format!("run.duration={}", args.window),
+    ]
+}
+
+fn one(args: &HybridArgs, scene: &str, label: String, mut overrides: Vec<String>) -> anyhow::Result<Row> {
+    // One frame at the start and one at the end (in steps of the scene as written: a chosen
+    // step rescales the count with it).
+    let (s, _) = grains_protocol::scene::load_with_overrides(&args.scenes.join(scene), &overrides)?;
+    overrides.push(format!("output.frames_every={}", s.steps));
+    tracing::info!("bench hybrid: {label}");
     let outcome = run(&RunOptions {
         bridge: None,
         scene_path: args.scenes.join(scene),
-        transport,
+        transport: TransportKind::Ipc,
         external: Vec::new(),
-        out_root: args.out.clone(),
+        out_root: args.out.join("runs"),
         progress: false,
         overrides,
         announce: false,
     })?;
     if outcome.status != Status::Completed {
-        bail!("{scene}: the run did not complete: {}", outcome.message);
+        bail!("{label}: the run did not complete: {}", outcome.message);
     }
-    read(&outcome.dir)
+    let dir = &outcome.dir;
+    let t = crate::metrics::MetricsTable::read(dir)?;
+    let first = |role| -> anyhow::Result<u64> { Ok(t.participant(role, "items")?.and_then(|v| v.first().copied()).unwrap_or(0.0) as u64) };
+    let mean = |role, what| -> anyhow::Result<f64> {
+        let v = t.participant(role, what)?.unwrap_or_default();
+        Ok(if v.is_empty() {
+            0.0
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        })
+    };
+    let run_scene = grains_protocol::scene::load(&dir.join("scene.toml"))?;
+    let half = 0.5 * run_scene.domain.cell_size / run_scene.mpm.points_per_axis as f64;
+    let n_bins = (run_scene.domain.max[0] / BIN) as usize;
+    let front = front(&profile(&deposit(dir, half)?, BIN, n_bins), BIN, FRONT_HEIGHT);
+    Ok(Row {
+        label,
+        grains: first(Role::Dem)?,
+        points: first(Role::Mpm)?,
+        substeps: run_scene.coupling.substeps,
+        wall: t.last("wall_s")?,
+        front,
+        dem_ms: mean(Role::Dem, "compute_ms")? / run_scene.dt,
+        mpm_ms: mean(Role::Mpm, "compute_ms")? / run_scene.dt,
+    })
 }
 
 pub fn bench(args: &HybridArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
+    let packing = packing(args)?;
+    let base = common(args, &packing);
     let mut rows = Vec::new();
-    tracing::info!("bench hybrid: DEM column {} × 0.4 m, {} s", args.width, args.duration);
-    let (grains, _, wall) = one(args, "column_collapse_2d.toml", TransportKind::Ipc, &[])?;
-    rows.push(Row {
-        label: "DEM, 100 substeps of 5e-7 s".into(),
-        grains,
-        points: 0,
-        wall,
-    });
-    for (n, &k) in args.substeps.iter().enumerate() {
-        let extra = [format!("coupling.substeps={k}"), format!("run.dt={:e}", k as f64 * 5e-7)];
-        let transports: &[TransportKind] = if n == 0 {
-            &[TransportKind::Ipc, TransportKind::Inproc]
-        } else {
-            &[TransportKind::Ipc]
-        };
-        for &t in transports {
-            tracing::info!("bench hybrid: hybrid k = {k} ({t:?})");
-            let (grains, points, wall) = one(args, "column_collapse_hybrid_2d.toml", t, &extra)?;
-            let how = if t == TransportKind::Ipc { "processes" } else { "threads" };
-            rows.push(Row {
-                label: format!("hybrid, k = {k}, {how}"),
-                grains,
-                points,
-                wall,
-            });
+    rows.push(one(args, "column_collapse_2d.toml", "DEM, 2 threads".into(), {
+        let mut o = base.clone();
+        o.push("run.threads=2".into());
+        o
+    })?);
+    for &h in &args.cells {
+        let mut kinds = vec![("layered zones", Vec::<String>::new())];
+        if args.surface {
+            kinds.push(("surface oracle", vec!["oracle.kind=\"surface\"".into(), "oracle.every=200".into()]));
+        }
+        for (kind, extra) in kinds {
+            let mut o = base.clone();
+            o.extend([
+                "run.threads=1".to_string(),
+                "coupling.substeps=\"auto\"".into(),
+                format!("coupling.dem_dt={DEM_DT:e}"),
+                "run.dt=1e-3".into(),
+                format!("domain.cell_size={h}"),
+                // Two cells of room under and left of the material for the MPM's wall layers.
+                format!("domain.min=[{},{}]", -3.0 * h, -3.0 * h),
+            ]);
+            // oracle.every counts macro-steps of run.dt's bound: 1 ms.
+            o.extend(
+                extra
+                    .into_iter()
+                    .map(|e| if e == "oracle.every=200" { "oracle.every=1".into() } else { e }),
+            );
+            o.extend(args.hybrid_overrides.iter().cloned());
+            rows.push(one(
+                args,
+                "column_collapse_hybrid_2d.toml",
+                format!("hybrid, {} mm cells, {kind}", h * 1e3),
+                o,
+            )?);
         }
     }
-    let dem_wall = rows[0].wall;
+    let md = table(args, &rows);
+    print!("{md}");
+    let path = args.out.join("hybrid.md");
+    std::fs::File::create(&path)
+        .and_then(|mut f| f.write_all(md.as_bytes()))
+        .with_context(|| format!("writing {}", path.display()))?;
+    tracing::info!("bench hybrid: table written to {}", path.display());
+    Ok(())
+}
+
+fn table(args: &HybridArgs, rows: &[Row]) -> String {
+    let dem = &rows[0];
+    let (dem_run, dem_wall) = (dem.front - args.width, dem.wall);
     let mut md = format!(
-        "# grains bench hybrid\n\nColumn collapse, column {} × 0.4 m, {} s simulated, no frames (`grains bench hybrid`).\n\n\
-         | run | DEM grains | MPM points | wall s | speed-up over DEM |\n|---|---:|---:|---:|---:|\n",
-        args.width, args.duration
+        "# grains bench hybrid\n\nColumn collapse {} × {HEIGHT} m from a settled packing, {} s simulated, DEM step {DEM_DT:e} s in \
+         every run (`grains bench hybrid`). Speed-up: the DEM's wall time over the run's. Runout: how far the front has moved \
+         past the column's foot at the end of the window.\n\n\
+         | run | DEM grains | MPM points | k | wall s | wall s per simulated s | speed-up | DEM / MPM compute ms per simulated ms | front m | runout m | runout vs DEM |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        args.width, args.window
     );
-    for r in &rows {
+    for r in rows {
+        let runout = r.front - args.width;
         md.push_str(&format!(
-            "| {} | {} | {} | {:.2} | {:.2}× |\n",
+            "| {} | {} | {} | {} | {:.1} | {:.0} | {:.2}× | {:.1} / {:.1} | {:.3} | {:.3} | {:+.1}% |\n",
             r.label,
             r.grains,
             r.points,
+            r.substeps,
             r.wall,
-            dem_wall / r.wall
+            r.wall / args.window,
+            dem_wall / r.wall,
+            r.dem_ms * 1e-3,
+            r.mpm_ms * 1e-3,
+            r.front,
+            runout,
+            100.0 * (runout / dem_run - 1.0)
         ));
     }
-    if let (Some(p), Some(t)) = (rows.get(1), rows.get(2)) {
-        md.push_str(&format!(
-            "\nSeparate processes over threads on the hybrid run (k = {}): {:+.1}% (one run each).\n",
-            args.substeps[0],
-            100.0 * (p.wall / t.wall - 1.0)
-        ));
-    }
-    print!("{md}");
-    let path = args.out.join("hybrid.md");
-    std::fs::File::create(&path)?.write_all(md.as_bytes())?;
-    tracing::info!("bench hybrid: table written to {}", path.display());
-    Ok(())
+    md
 }
