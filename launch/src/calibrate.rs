@@ -157,7 +157,8 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
     // diameter so that nothing overlaps at the start.
     let r_max = dem.radius + 2.0 * dem.radius_std;
     let spacing = 2.04 * r_max;
-    let cols = ((grains as f64 / 2.0 / (3f64.sqrt() / 2.0)).sqrt()).round().max(4.0);
+    // cols × rows grains, rows = 2 × cols / (√3 / 2) on a box twice as tall as wide.
+    let cols = (grains as f64 * 3f64.sqrt() / 4.0).sqrt().round().max(4.0);
     let width = cols * spacing + 2.0 * r_max;
     let height = 2.0 * width;
     let mut rng = Rng::new(seed);
@@ -243,7 +244,8 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
     settle(&mut state, &mut pipe, pressure)?;
     // Shear: the top wall moves down at ε̇ H0, the right wall holds σ3 = p0, to 30 % of axial
     // strain.
-    let (_, _, w0, h0) = run(&mut state, &mut pipe, 1);
+    let (sx0, sy0, w0, h0) = run(&mut state, &mut pipe, SERVO_STEPS);
+    let q0 = sy0 - sx0;
     let mut records = Vec::new();
     // Records every 0.02 % of axial strain up to 0.5 % (the start), then every 0.25 %.
     let mut next = FINE;
@@ -293,18 +295,29 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
         .collect();
     let lateral_mean = lateral.iter().sum::<f64>() / lateral.len() as f64;
     let critical_spread = (window.iter().map(|a| (a - critical).powi(2)).sum::<f64>() / window.len() as f64).sqrt();
-    // E50: the first record past half the peak deviator, secant from the start.
-    let q_peak = records.iter().map(|r| r.sigma1 - r.sigma3).fold(f64::MIN, f64::max);
+    // Moduli from the change since the start of the shear (the consolidation leaves the two
+    // stresses within 2 % of p0, not equal). E0: the least-squares slope (with an intercept)
+    // of the deviator against the axial strain over the first 0.1 %; E50: the secant to the
+    // first record past half the peak deviator.
+    let q = |r: &Record| r.sigma1 - r.sigma3;
+    let q_peak = records.iter().map(q).fold(f64::MIN, f64::max);
     let half = records
         .iter()
-        .find(|r| r.sigma1 - r.sigma3 >= 0.5 * q_peak)
+        .find(|r| q(r) - q0 >= 0.5 * (q_peak - q0))
         .context("no record reached half the peak")?;
-    let e50_plane = (half.sigma1 - pressure) / half.axial.max(f64::MIN_POSITIVE);
-    // E0: the least-squares slope of the deviator σ1 − σ3 against the axial strain over the
-    // first 0.1 %, through the origin (the start is isotropic).
-    let first: Vec<&Record> = records.iter().filter(|r| r.axial <= 0.001 + 1e-12).collect();
-    let e0_plane = first.iter().map(|r| (r.sigma1 - r.sigma3) * r.axial).sum::<f64>()
-        / first.iter().map(|r| r.axial * r.axial).sum::<f64>().max(f64::MIN_POSITIVE);
+    let e50_plane = (q(half) - q0) / half.axial.max(f64::MIN_POSITIVE);
+    let first: Vec<(f64, f64)> = records
+        .iter()
+        .filter(|r| r.axial <= 0.001 + 1e-12)
+        .map(|r| (r.axial, q(r)))
+        .collect();
+    let m = first.len() as f64;
+    let (sx, sy) = (
+        first.iter().map(|p| p.0).sum::<f64>() / m,
+        first.iter().map(|p| p.1).sum::<f64>() / m,
+    );
+    let e0_plane = first.iter().map(|p| (p.0 - sx) * (p.1 - sy)).sum::<f64>()
+        / first.iter().map(|p| (p.0 - sx).powi(2)).sum::<f64>().max(f64::MIN_POSITIVE);
     Ok(Calibration {
         records,
         pressure,
@@ -460,7 +473,7 @@ pub fn write_calibration(text: &str, name: &str, friction_angle: f64, young: f64
     let values = [
         ("friction_angle", format!("{friction_angle:.2}")),
         ("young", format!("{young:.4e}")),
-        ("calibration", format!("{provenance:?}")),
+        ("calibration", toml_string(provenance)),
     ];
     let mut out: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
     let mut missing = Vec::new();
@@ -470,7 +483,11 @@ pub fn write_calibration(text: &str, name: &str, friction_angle: f64, young: f64
             l.starts_with(key) && l[key.len()..].trim_start().starts_with('=')
         });
         match at {
-            Some(j) => out[j] = format!("{key} = {value}"),
+            // A comment after the old value stays.
+            Some(j) => {
+                let comment = lines[j].find(" #").map_or("", |c| &lines[j][c..]);
+                out[j] = format!("{key} = {value}{comment}");
+            }
             None => missing.push(format!("{key} = {value}")),
         }
     }
@@ -491,6 +508,21 @@ pub fn write_calibration(text: &str, name: &str, friction_angle: f64, young: f64
         s.push('\n');
     }
     Ok(s)
+}
+
+/// A TOML basic string of `s`.
+fn toml_string(s: &str) -> String {
+    let mut out = String::from('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04X}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
 }
 
 #[cfg(test)]
@@ -545,5 +577,10 @@ mod tests {
             "{again}"
         );
         assert!(write_calibration(text, "clay", 20.0, 1e6, "x").is_err());
+        // A comment after a replaced value stays; the provenance is a valid TOML string.
+        let kept = write_calibration(text, "sand", 21.0, 1e6, r#"a "quoted" \ test"#).unwrap();
+        assert!(kept.contains("friction_angle = 21.00 # hand-set\n"), "{kept}");
+        let doc: toml::Table = kept.parse().unwrap();
+        assert_eq!(doc["material"][0]["mpm"]["calibration"].as_str(), Some(r#"a "quoted" \ test"#));
     }
 }

@@ -8,6 +8,7 @@
 //! - [`bench`]: `grains bench`, figures measured side by side;
 //! - [`render`]: `grains render`, a picture of a frame;
 //! - [`calibrate`]: `grains calibrate`, the continuum's parameters from a DEM element test;
+//! - [`cost`]: what a hybrid scene and its pure DEM will cost, from measured costs;
 //! - [`pack`], [`remote`], [`clock`]: `grains pack`, the remote clients' glue, calendar dates.
 //!
 //! Nothing here depends on what depends on it: `validate` and `bench` use `run`, never the
@@ -16,6 +17,7 @@
 pub mod bench;
 pub mod calibrate;
 pub mod clock;
+pub mod cost;
 pub mod metrics;
 pub mod pack;
 pub mod remote;

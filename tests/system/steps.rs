@@ -40,7 +40,7 @@ fn auto_substeps_keep_both_solvers_within_their_stable_steps() {
     let mpm = grains_mpm_service::setup::stable_step(&s).unwrap();
     let dem_dt = s.dt / s.coupling.substeps as f64;
     assert!((dem_dt / 5e-7 - 1.0).abs() < 1e-9, "the DEM step asked for: {dem_dt}");
-    assert!(s.dt <= mpm * (1.0 + 1e-12), "macro-step {} above the MPM's stable step {mpm}", s.dt);
+    assert!(s.dt <= mpm, "macro-step {} above the MPM's stable step {mpm}", s.dt);
     assert!(
         s.dt + 5e-7 > mpm,
         "the largest k: {} steps of 5e-7 s, limit {mpm}",
@@ -70,9 +70,13 @@ fn auto_substeps_keep_both_solvers_within_their_stable_steps() {
         dem_dt > 0.99 * dem_limit,
         "the DEM runs at its stable step: {dem_dt} vs {dem_limit}"
     );
-    assert!(s.dt <= mpm * (1.0 + 1e-12) && s.dt + dem_dt > mpm, "k = {}", s.coupling.substeps);
+    assert!(s.dt <= mpm && s.dt + dem_dt > mpm, "k = {}", s.coupling.substeps);
 
     // run.dt binds when it is the smallest: 2e-6 s with a DEM step of 5e-7 s is 4 substeps.
     let (s, _) = auto_run("auto_requested", &["coupling.dem_dt=5e-7", "run.dt=2e-6", "run.steps=100"]);
     assert_eq!(s.coupling.substeps, 4);
+
+    // A DEM step above run.dt comes down to it: one substep of run.dt.
+    let (s, _) = auto_run("auto_one", &["coupling.dem_dt=5e-6", "run.dt=2e-6", "run.steps=100"]);
+    assert_eq!((s.coupling.substeps, s.dt), (1, 2e-6));
 }

@@ -54,11 +54,18 @@ struct Row {
     label: String,
     grains: u64,
     points: u64,
+    /// Mean grains and points over the run.
+    mean_grains: f64,
+    mean_points: f64,
     substeps: u32,
+    steps: u64,
+    /// The macro-step [s].
+    dt: f64,
     wall: f64,
     front: f64,
-    dem_ms: f64,
-    mpm_ms: f64,
+    /// Mean compute time of the DEM and of the MPM per macro-step [s].
+    dem_step: f64,
+    mpm_step: f64,
 }
 
 /// The settled packing of the bench's column, poured once.
@@ -100,20 +107,26 @@ fn common(args: &HybridArgs, packing: &Path) -> Vec<String> {
     ]
 }
 
-fn one(args: &HybridArgs, scene: &str, label: String, mut overrides: Vec<String>) -> anyhow::Result<Row> {
-    // One frame at the start and one at the end (in steps of the scene as written: a chosen
-    // step rescales the count with it).
-    let (s, _) = grains_protocol::scene::load_with_overrides(&args.scenes.join(scene), &overrides)?;
-    overrides.push(format!("output.frames_every={}", s.steps));
+fn one(args: &HybridArgs, scene: &str, label: String, overrides: Vec<String>) -> anyhow::Result<Row> {
+    // The scene as it will run (steps chosen), in a file of its own, with one frame at the
+    // start and one at the end.
+    let (s, text, _) = crate::run::steps::load(&args.scenes.join(scene), &overrides)?;
+    let resolved = std::path::absolute(
+        args.out
+            .join("scenes")
+            .join(format!("{}.toml", label.replace([' ', ',', '/'], "_"))),
+    )?;
+    std::fs::create_dir_all(resolved.parent().expect("a file in a directory"))?;
+    std::fs::write(&resolved, &text)?;
     tracing::info!("bench hybrid: {label}");
     let outcome = run(&RunOptions {
         bridge: None,
-        scene_path: args.scenes.join(scene),
+        scene_path: resolved,
         transport: TransportKind::Ipc,
         external: Vec::new(),
         out_root: args.out.join("runs"),
         progress: false,
-        overrides,
+        overrides: vec![format!("output.frames_every={}", s.steps)],
         announce: false,
     })?;
     if outcome.status != Status::Completed {
@@ -138,11 +151,15 @@ fn one(args: &HybridArgs, scene: &str, label: String, mut overrides: Vec<String>
         label,
         grains: first(Role::Dem)?,
         points: first(Role::Mpm)?,
+        mean_grains: mean(Role::Dem, "items")?,
+        mean_points: mean(Role::Mpm, "items")?,
         substeps: run_scene.coupling.substeps,
+        steps: run_scene.steps,
+        dt: run_scene.dt,
         wall: t.last("wall_s")?,
         front,
-        dem_ms: mean(Role::Dem, "compute_ms")? / run_scene.dt,
-        mpm_ms: mean(Role::Mpm, "compute_ms")? / run_scene.dt,
+        dem_step: 1e-3 * mean(Role::Dem, "compute_ms")?,
+        mpm_step: 1e-3 * mean(Role::Mpm, "compute_ms")?,
     })
 }
 
@@ -204,7 +221,7 @@ fn table(args: &HybridArgs, rows: &[Row]) -> String {
         "# grains bench hybrid\n\nColumn collapse {} × {HEIGHT} m from a settled packing, {} s simulated, DEM step {DEM_DT:e} s in \
          every run (`grains bench hybrid`). Speed-up: the DEM's wall time over the run's. Runout: how far the front has moved \
          past the column's foot at the end of the window.\n\n\
-         | run | DEM grains | MPM points | k | wall s | wall s per simulated s | speed-up | DEM / MPM compute ms per simulated ms | front m | runout m | runout vs DEM |\n\
+         | run | DEM grains | MPM points | k | wall s | wall s per simulated s | speed-up | DEM / MPM compute s per simulated s | front m | runout m | runout vs DEM |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         args.width, args.window
     );
@@ -219,12 +236,61 @@ fn table(args: &HybridArgs, rows: &[Row]) -> String {
             r.wall,
             r.wall / args.window,
             dem_wall / r.wall,
-            r.dem_ms * 1e-3,
-            r.mpm_ms * 1e-3,
+            r.dem_step / r.dt,
+            r.mpm_step / r.dt,
             r.front,
             runout,
             100.0 * (runout / dem_run - 1.0)
         ));
     }
+    if let Some(c) = fit(rows) {
+        md.push_str(&format!(
+            "\nCosts fitted to these runs (`launch/src/cost.rs`): DEM alone {:.3e} s per grain-step (2 threads), the hybrid's DEM \
+             {:.3e} s per grain-step (1 thread), its MPM {:.3e} s per point-step (1 thread), {:.3e} s per macro-step beside them.\n",
+            c.dem_alone, c.dem_hybrid, c.mpm, c.step
+        ));
+        md.push_str("\n| run | wall s | model s |\n|---|---:|---:|\n");
+        for r in rows {
+            let n = crate::cost::Counts {
+                hybrid_grains: r.mean_grains as usize,
+                points: r.mean_points as usize,
+                all_grains: rows[0].mean_grains as usize,
+                substeps: r.substeps,
+                steps: r.steps,
+            };
+            let (h, d) = crate::cost::predict(&c, &n);
+            md.push_str(&format!(
+                "| {} | {:.1} | {:.1} |\n",
+                r.label,
+                r.wall,
+                if r.points == 0 { d } else { h }
+            ));
+        }
+    }
     md
+}
+
+/// The model's costs from the runs: the DEM's per grain-step alone (first row) and in the
+/// hybrid runs, the MPM's per point-step, and what a macro-step adds beyond the slower solver
+/// (means over the hybrid rows).
+fn fit(rows: &[Row]) -> Option<crate::cost::Costs> {
+    let dem = rows.first()?;
+    let hybrid: Vec<&Row> = rows.iter().skip(1).filter(|r| r.mean_points > 0.0).collect();
+    if hybrid.is_empty() {
+        return None;
+    }
+    let n = hybrid.len() as f64;
+    let dem_hybrid = hybrid.iter().map(|r| r.dem_step / (r.substeps as f64 * r.mean_grains)).sum::<f64>() / n;
+    let mpm = hybrid.iter().map(|r| r.mpm_step / r.mean_points).sum::<f64>() / n;
+    let step = hybrid
+        .iter()
+        .map(|r| (r.wall / r.steps as f64 - r.dem_step.max(r.mpm_step)).max(0.0))
+        .sum::<f64>()
+        / n;
+    Some(crate::cost::Costs {
+        dem_alone: dem.dem_step / (dem.substeps as f64 * dem.mean_grains),
+        dem_hybrid,
+        mpm,
+        step,
+    })
 }

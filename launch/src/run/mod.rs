@@ -124,7 +124,7 @@ pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
 /// `grains check`: validates a scene file and the solvers' checks of it, and says what a
 /// run would start.
 pub fn check(path: &Path) -> anyhow::Result<()> {
-    let (s, _, chosen) = steps::load(path, &[])?;
+    let (s, text, chosen) = steps::load(path, &[])?;
     if let Some(c) = chosen {
         println!("{}: {c}", path.display());
     }
@@ -141,6 +141,23 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
         s.dt,
         roles.join(", ")
     );
+    if let Some(n) = crate::cost::counts(&s, &text)? {
+        let (hybrid, dem) = crate::cost::predict(&crate::cost::MEASURED, &n);
+        println!(
+            "{}: predicted wall time on this kind of machine: hybrid {hybrid:.0} s ({} grains, {} points at the start, k = {}), \
+             pure DEM {dem:.0} s ({} grains, same DEM step): {}",
+            path.display(),
+            n.hybrid_grains,
+            n.points,
+            n.substeps,
+            n.all_grains,
+            if hybrid < dem {
+                format!("run it as hybrid ({:.1}x)", dem / hybrid)
+            } else {
+                format!("the pure DEM is cheaper ({:.1}x)", hybrid / dem)
+            }
+        );
+    }
     Ok(())
 }
 

@@ -8,6 +8,7 @@
 //! number `grains_mpm::pipeline::MAX_CFL`). Both limits are the ones `grains run` enforces on a
 //! scene with fixed steps, and `grains validate --part stability` maps what lies beyond them.
 
+use super::BadInput;
 use grains_protocol::scene::{self, Scene};
 use std::path::Path;
 
@@ -21,6 +22,8 @@ pub enum Limit {
     /// The DEM step itself (k = 1: the MPM's limit or `run.dt` is below the DEM step, which
     /// then comes down to it).
     Dem,
+    /// The most substeps a scene may have (10,000).
+    Cap,
 }
 
 /// The steps chosen for a scene with `substeps = "auto"`.
@@ -44,6 +47,7 @@ impl std::fmt::Display for Chosen {
             Limit::Mpm => "the MPM's stable step",
             Limit::Requested => "run.dt",
             Limit::Dem => "the DEM step (k = 1)",
+            Limit::Cap => "the cap of 10,000 substeps",
         };
         write!(
             f,
@@ -54,32 +58,51 @@ impl std::fmt::Display for Chosen {
     }
 }
 
-/// The steps for `run.dt` = `requested` and `coupling.dem_dt` = `dem_dt` (None: the DEM's stable step), given
-/// the DEM's and the MPM's stable steps.
-pub fn choose(requested: f64, dem_dt: Option<f64>, dem_limit: f64, mpm_limit: f64) -> Chosen {
+/// The steps for `run.dt` = `requested` and `coupling.dem_dt` = `dem_dt` (None: the DEM's
+/// stable step), given the DEM's and the MPM's stable steps. The result holds the checks the
+/// solvers make exactly (dt ≤ the MPM's limit and dt / k ≤ the DEM's, in floating point), so
+/// that the run it makes is never refused. A `dem_dt` above the DEM's own limit is refused.
+pub fn choose(requested: f64, dem_dt: Option<f64>, dem_limit: f64, mpm_limit: f64) -> anyhow::Result<Chosen> {
+    if let Some(d) = dem_dt
+        && d > dem_limit
+    {
+        anyhow::bail!(BadInput(format!(
+            "coupling.dem_dt = {d:e} s is above the DEM's stable step {dem_limit:.4e} s (20% of its critical step): lower it"
+        )));
+    }
     let dem = dem_dt.unwrap_or(dem_limit);
-    let (bound, limit) = if mpm_limit <= requested {
+    let (bound, mut limit) = if mpm_limit <= requested {
         (mpm_limit, Limit::Mpm)
     } else {
         (requested, Limit::Requested)
     };
-    // The largest k with k · dem ≤ bound (a hair of tolerance: a bound that is an exact multiple
-    // in decimal should not lose a substep to rounding).
-    let k = (bound / dem * (1.0 + 1e-12)).floor().min(10_000.0);
-    let (substeps, dt, limit) = if k >= 1.0 {
-        (k as u32, k * dem, limit)
+    // The largest k with k · dem ≤ bound, at most 10,000.
+    let mut k = (bound / dem).floor().clamp(0.0, 10_000.0);
+    if k < 10_000.0 && (k + 1.0) * dem <= bound {
+        k += 1.0;
+    }
+    if k == 10_000.0 {
+        limit = Limit::Cap;
+    }
+    let (k, mut dt) = if k >= 1.0 {
+        (k, k * dem)
     } else {
-        (1, bound, Limit::Dem)
+        limit = Limit::Dem;
+        (1.0, bound)
     };
-    Chosen {
-        substeps,
+    // Rounding must not take either step over its limit.
+    while dt > bound || dt / k > dem.min(dem_limit) {
+        dt = dt.next_down();
+    }
+    Ok(Chosen {
+        substeps: k as u32,
         dt,
-        dem_dt: dt / substeps as f64,
+        dem_dt: dt / k,
         dem_limit,
         mpm_limit,
         requested,
         limit,
-    }
+    })
 }
 
 /// Loads a scene with its overrides, as `scene::load_with_overrides`, and resolves
@@ -95,8 +118,8 @@ pub fn load(path: &Path, overrides: &[String]) -> anyhow::Result<(Scene, String,
     let Some(mpm_limit) = grains_mpm_service::setup::stable_step(&scene) else {
         anyhow::bail!("{}: coupling.substeps = \"auto\" needs MPM material", path.display());
     };
-    let chosen = choose(scene.dt, auto.dem_dt, dem_limit, mpm_limit);
-    let (scene, text) = scene::with_resolved_steps(&text, &scene, chosen.dt, chosen.substeps)?;
+    let chosen = choose(scene.dt, auto.dem_dt, dem_limit, mpm_limit)?;
+    let (scene, text) = scene::with_resolved_steps(&text, &scene, chosen.dt, chosen.substeps, chosen.dem_dt)?;
     Ok((scene, text, Some(chosen)))
 }
 
@@ -105,23 +128,36 @@ mod tests {
     use super::*;
 
     /// Each limit in turn sets the macro-step, which is always a whole number of DEM steps
-    /// within both stable steps and run.dt.
+    /// within both stable steps and run.dt, exactly (the solvers' checks are strict).
     #[test]
     fn the_tighter_limit_sets_the_macro_step() {
+        let ok = |c: &Chosen| c.dt <= c.mpm_limit && c.dt <= c.requested && c.dt / c.substeps as f64 <= c.dem_limit;
         // The MPM's limit binds: 4.9e-5 / 5e-7 = 98 substeps.
-        let c = choose(1e-3, Some(5e-7), 7e-6, 4.9e-5);
+        let c = choose(1e-3, Some(5e-7), 7e-6, 4.9e-5).unwrap();
         assert_eq!((c.substeps, c.limit), (98, Limit::Mpm));
-        assert!((c.dt - 4.9e-5).abs() < 1e-18 && c.dt <= c.mpm_limit);
+        assert!(ok(&c) && (c.dt - 4.9e-5).abs() < 1e-18);
         // run.dt binds.
-        let c = choose(2e-5, Some(5e-7), 7e-6, 4.9e-5);
+        let c = choose(2e-5, Some(5e-7), 7e-6, 4.9e-5).unwrap();
         assert_eq!((c.substeps, c.limit), (40, Limit::Requested));
+        assert!(ok(&c));
         // Without dem_dt the DEM runs at its own stable step: floor(4.9e-5 / 7e-6) = 7.
-        let c = choose(1e-3, None, 7e-6, 4.9e-5);
+        let c = choose(1e-3, None, 7e-6, 4.9e-5).unwrap();
         assert_eq!((c.substeps, c.limit), (7, Limit::Mpm));
-        assert!(c.dem_dt <= 7e-6 && c.dt <= 4.9e-5);
+        assert!(ok(&c));
         // A DEM step above the MPM's limit comes down to it: k = 1.
-        let c = choose(1e-3, Some(1e-4), 2e-4, 4.9e-5);
+        let c = choose(1e-3, Some(1e-4), 2e-4, 4.9e-5).unwrap();
         assert_eq!((c.substeps, c.limit), (1, Limit::Dem));
-        assert_eq!((c.dt, c.dem_dt), (4.9e-5, 4.9e-5));
+        assert!(ok(&c) && c.dt == 4.9e-5);
+        // A DEM step above the DEM's own limit is refused.
+        assert!(choose(1e-3, Some(1e-5), 7e-6, 4.9e-5).is_err());
+        // Awkward ratios: the product of k and the DEM step never ends above a limit.
+        let mut x = 0.123_456_789;
+        for _ in 0..2000 {
+            x = (x * 7.31 + 0.17) % 1.0;
+            let (d, m) = (1e-6 * (0.5 + x), 1e-5 * (1.0 + 9.0 * ((x * 13.7) % 1.0)));
+            for c in [choose(1.0, None, d, m).unwrap(), choose(1.0, Some(0.7 * d), d, m).unwrap()] {
+                assert!(ok(&c), "{c:?}");
+            }
+        }
     }
 }

@@ -169,7 +169,12 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 /// is, with the hash of its bytes.
 pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, String), SceneError> {
     let (text, hash) = read(path)?;
-    let scene = from_str(&text, path, hash)?; // the file itself must be sound before it is edited
+    with_overrides(&text, path, hash, overrides)
+}
+
+/// [`load_with_overrides`] of a scene's text (as read from `path`, whose hash is `hash`).
+pub fn with_overrides(text: &str, path: &Path, hash: u64, overrides: &[String]) -> Result<(Scene, String), SceneError> {
+    let scene = from_str(text, path, hash)?; // the file itself must be sound before it is edited
     let parsed = overrides::parse(path, overrides)?;
     let mut doc = toml::Value::Table(text.parse::<toml::Table>().map_err(|e| SceneError {
         path: path.into(),
@@ -180,7 +185,7 @@ pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, 
     overrides::apply(path, &mut doc, &parsed, overrides)?;
     let made_absolute = absolute_file_paths(&mut doc, path)?;
     if parsed.is_empty() && !made_absolute {
-        return Ok((scene, text));
+        return Ok((scene, text.to_string()));
     }
     let text = toml::to_string(&doc).map_err(|e| SceneError {
         path: path.into(),

@@ -6,11 +6,12 @@ use super::errors::SceneError;
 use super::overrides::FieldPath;
 use super::{Scene, from_str, hash_bytes};
 
-/// `text` (a scene with `substeps = "auto"`, validated as `scene`) with `run.dt = dt` and
-/// `coupling.substeps = substeps`. Cadences counted in macro-steps (`run.steps`,
+/// `text` (a scene with `substeps = "auto"`, validated as `scene`) with `run.dt = dt`,
+/// `coupling.substeps = substeps` and `coupling.dem_dt = dem_dt` (the DEM step they make,
+/// stated). Cadences counted in macro-steps (`run.steps`,
 /// `output.frames_every`, `oracle.every`, where the file gives them) are rescaled to keep
 /// their length in time (at least 1); `run.duration` stays as it is.
-pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32) -> Result<(Scene, String), SceneError> {
+pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32, dem_dt: f64) -> Result<(Scene, String), SceneError> {
     let plain = |message: String| SceneError {
         path: scene.path.clone(),
         line_col: None,
@@ -38,6 +39,10 @@ pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32) ->
     FieldPath::root("coupling")
         .key("substeps")
         .set(&mut doc, toml::Value::Integer(substeps as i64))
+        .map_err(plain)?;
+    FieldPath::root("coupling")
+        .key("dem_dt")
+        .set(&mut doc, toml::Value::Float(dem_dt))
         .map_err(plain)?;
     let text = toml::to_string(&doc).map_err(|e| plain(format!("cannot write the resolved scene: {e}")))?;
     let resolved = from_str(&text, &scene.path, hash_bytes(text.as_bytes())).map_err(|mut e| {

@@ -1,4 +1,4 @@
-//! The DEM side of the grid-vs-grid coupling (Yue 2018 §3.5, Alg. 4–6), as plain functions:
+//! The DEM side of the grid-vs-grid coupling (Yue 2018 §3.5, Alg. 4–6):
 //!
 //! - [`Stencils`]: the MPM grid nodes around the grains of the reconciliation zone, with the
 //!   MPM's own shape functions, evaluated once per macro-step;
@@ -160,25 +160,28 @@ mod tests {
         (x, v, m)
     }
 
-    /// Alg. 4 conserves the rasterized mass and momentum (the weights are a partition of unity),
-    /// for both kernels, and leaves out the grains outside the zone.
+    /// Alg. 4 conserves the rasterized mass, momentum and impulse (the weights are a partition
+    /// of unity), for both kernels; every node listed carries weight.
     #[test]
-    fn rasterizing_conserves_mass_and_momentum() {
+    fn rasterizing_conserves_mass_momentum_and_impulse() {
         let (x, v, m) = grains();
         let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], 0.05, 2);
         for kernel in [Kernel::Bspline2, Kernel::Gimp { half_width: 0.0125 }] {
-            let kept: Vec<usize> = (0..x.len()).filter(|k| k % 4 != 0).collect();
             let mut st = Stencils::<D2>::default();
-            st.build(&grid, kernel, &kept.iter().map(|&k| x[k]).collect::<Vec<_>>());
-            let (r, _) = st.rasterize(kept.iter().map(|&k| (m[k], v[k], DVec2::ZERO)));
+            st.build(&grid, kernel, &x);
+            let impulse = |k: usize| DVec2::new(1e-3 * k as f64, -2e-3);
+            let (r, j) = st.rasterize((0..x.len()).map(|k| (m[k], v[k], impulse(k))));
             assert!(r.windows(2).all(|w| w[0].node < w[1].node));
+            assert!(r.iter().all(|n| n.mass > 0.0) && j.len() == r.len());
             let mass: f64 = r.iter().map(|n| n.mass).sum();
             let p = r.iter().fold(DVec2::ZERO, |a, n| a + n.momentum);
-            let (m_in, p_in) = (0..x.len())
-                .filter(|k| k % 4 != 0)
-                .fold((0.0, DVec2::ZERO), |(a, b), k| (a + m[k], b + v[k] * m[k]));
+            let jj = j.iter().fold(DVec2::ZERO, |a, &b| a + b);
+            let (m_in, p_in, j_in) = (0..x.len()).fold((0.0, DVec2::ZERO, DVec2::ZERO), |(a, b, c), k| {
+                (a + m[k], b + v[k] * m[k], c + impulse(k))
+            });
             assert!((mass - m_in).abs() < 1e-14, "{kernel:?}: {mass} vs {m_in}");
             assert!((p - p_in).length() < 1e-14, "{kernel:?}");
+            assert!((jj - j_in).length() < 1e-12, "{kernel:?}: {jj:?} vs {j_in:?}");
         }
     }
 

@@ -63,7 +63,8 @@ pub struct DemPipeline<S: Space> {
     /// Grains moved outside of a step ([`DemPipeline::moved`]): forces are due again.
     resync: bool,
     /// Keep the grains' storage order ([`DemPipeline::run_in_order`]); a re-sort that fell
-    /// due meanwhile waits for the next [`DemPipeline::moved`].
+    /// due meanwhile waits for the next preparation out of it ([`DemPipeline::settle`] or the
+    /// next step of [`DemPipeline::run`]).
     hold_order: bool,
     sort_due: bool,
 }
@@ -194,7 +195,8 @@ impl<S: Space> DemPipeline<S> {
             self.finish_forces(state, 0.0);
             self.prepared = true;
             self.resync = false;
-        } else if self.resync {
+            self.sort_due = false;
+        } else if self.resync || (self.sort_due && !self.hold_order) {
             self.refresh_hot(state);
             if self.sort_due && !self.hold_order {
                 self.sort_grains(state);
