@@ -294,6 +294,12 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
         .map(|r| r.sigma3 / pressure)
         .collect();
     let lateral_mean = lateral.iter().sum::<f64>() / lateral.len() as f64;
+    if (lateral_mean - 1.0).abs() > 0.1 {
+        bail!(
+            "the lateral stress was not held at p0 over the critical-state window (mean {lateral_mean:.2} p0): the servo cannot \
+             follow this shear rate; lower --inertial"
+        );
+    }
     let critical_spread = (window.iter().map(|a| (a - critical).powi(2)).sum::<f64>() / window.len() as f64).sqrt();
     // Moduli from the change since the start of the shear (the consolidation leaves the two
     // stresses within 2 % of p0, not equal). E0: the least-squares slope (with an intercept)

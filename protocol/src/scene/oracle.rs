@@ -38,6 +38,11 @@ pub struct Oracle {
     pub centre: Option<f64>,
     /// `surface`: r_h, the band's half-width [m] (default `coupling.hybrid_band / 2`).
     pub half_width: Option<f64>,
+    /// `surface` and `layered`: material whose inertial number I = γ̇ d √(ρ / p) exceeds this
+    /// counts as not dense, like a free surface, so that the zones keep flowing material
+    /// discrete and the band in quasi-static material (Yue 2018 §4.1 names fast shear as a
+    /// reason for grains; GDR MiDi 2004 puts quasi-static flow below I ≈ 1e-3). 0: off.
+    pub max_inertial: f64,
 }
 
 pub(super) fn validate(ctx: &Ctx, raw: Option<&RawOracle>) -> Result<Option<Oracle>, SceneError> {
@@ -71,6 +76,10 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawOracle>) -> Result<Option<Orac
         half_width: match &o.half_width {
             None => None,
             Some(c) => Some(in_range(ctx, c, "oracle.half_width", Closed(0.0), Bound::None)?),
+        },
+        max_inertial: match &o.max_inertial {
+            None => 0.0,
+            Some(i) => in_range(ctx, i, "oracle.max_inertial", Closed(0.0), Bound::None)?,
         },
     }))
 }

@@ -148,6 +148,7 @@ pub struct RawOracle {
     pub critical_packing: Option<Spanned<f64>>,
     pub centre: Option<Spanned<f64>>,
     pub half_width: Option<Spanned<f64>>,
+    pub max_inertial: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]

@@ -135,7 +135,13 @@ impl<S: Space> CoupledStep<S> {
                 g.external[i] = a * (g.mass[i] * g.scale[i]);
             }
         }
-        pipeline.run_in_order(state, dt / substeps as f64, substeps);
+        if self.hybrid.is_empty() {
+            // Nothing is taken by index: the pure DEM's steps, re-sorts where they fall due
+            // (an all-discrete hybrid is then the DEM, byte for byte).
+            pipeline.run(state, dt / substeps as f64, substeps);
+        } else {
+            pipeline.run_in_order(state, dt / substeps as f64, substeps);
+        }
     }
 
     /// Yue 2018 Alg. 4: the hybrid grains' weighted mass (1 − w) m and predicted momentum,

@@ -16,6 +16,7 @@
 //! The stage that runs them through a macro-step, with the advection from the saved positions
 //! (Alg. 6), is [`crate::coupled`].
 
+pub use grains_grid::gradient::Gradient;
 use grains_grid::shape::for_each_node;
 use grains_grid::{Grid, Kernel, Space};
 
@@ -112,32 +113,6 @@ impl<S: Space> Stencils<S> {
             }
         }
         (if total > 0.0 { v * (1.0 / total) } else { v }, Gradient(l))
-    }
-}
-
-/// The gradient L[a][b] = ∂v_a/∂x_b of an interpolated velocity field (zero rows and columns
-/// beyond the space's dimension).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Gradient(pub [[f64; 3]; 3]);
-
-impl Gradient {
-    /// The spin ½ ∇ × v.
-    pub fn spin<S: Space>(&self) -> S::Ang {
-        let l = &self.0;
-        S::ang_from_array([0.5 * (l[2][1] - l[1][2]), 0.5 * (l[0][2] - l[2][0]), 0.5 * (l[1][0] - l[0][1])])
-    }
-
-    /// The shear rate √(2 D′:D′), D′ the deviatoric part of the strain rate (of the space's
-    /// `dim` dimensions): γ̇ of a simple shear v_x = γ̇ y.
-    pub fn shear_rate(&self, dim: usize) -> f64 {
-        let l = &self.0;
-        let mean = (0..dim).map(|a| l[a][a]).sum::<f64>() / dim as f64;
-        let pairs = (0..dim).flat_map(|a| (0..dim).map(move |b| (a, b)));
-        let dd: f64 = pairs
-            .map(|(a, b)| 0.5 * (l[a][b] + l[b][a]) - if a == b { mean } else { 0.0 })
-            .map(|d| d * d)
-            .sum();
-        (2.0 * dd).sqrt()
     }
 }
 

@@ -5,11 +5,14 @@
 //! - [`shape`]: the background grid and its shape functions — GIMP (Bardenhagen & Kober 2004,
 //!   as Yue 2018 §3.4 uses it, particle width = cell width / points per cell) and quadratic
 //!   B-splines — through which the MPM transfers, and the DEM and the coupler rasterize;
+//! - [`gradient`]: a velocity field's gradient, its spin and its shear rate (the DEM's band
+//!   grains, the oracle's inertial number);
 //! - [`homogenize`]: the grains' stress on the grid from their contacts (Yue 2018 Alg. 11),
 //!   computed by the DEM for the oracle's new material points;
 //! - [`rng`]: seeded SplitMix64 randomness and the polydisperse radius draw, for the DEM's
 //!   packings, the oracle's new grains and the synthetic rasters.
 
+pub mod gradient;
 pub mod homogenize;
 pub mod rng;
 pub mod shape;

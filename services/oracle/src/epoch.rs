@@ -100,6 +100,11 @@ pub struct Settings {
     pub weight: f64,
     /// Density of the grains [kg/m³] (the mass of a new grain).
     pub grain_density: f64,
+    /// Material whose inertial number exceeds this counts as not dense ([`inertial_numbers`]):
+    /// flowing material is kept discrete. 0: off.
+    pub max_inertial: f64,
+    /// Gravity [m/s²] (the weight above a cell, for its pressure).
+    pub gravity: [f64; 3],
 }
 
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -161,7 +166,7 @@ pub struct Inputs<'a> {
 pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_point_id): (u64, u64), rng: &mut Rng) -> Plan {
     let epoch = Epoch::new(input, s, S::DIM);
     let disks: Vec<([f64; 3], f64)> = input.grains.iter().map(|g| (g.x, g.radius)).collect();
-    let distance = epoch.signed_distance(&disks);
+    let distance = epoch.signed_distance::<S>(&disks);
     let zones = epoch.zones(&distance);
     let (delete_grains, delete_points) = epoch.deletions(&zones);
     let new_points = epoch.homogenize::<S>(&zones, next_point_id, rng);
@@ -243,7 +248,7 @@ impl<'a> Epoch<'a> {
     /// signed distance to its isocontour at Φρ, positive inside (layered: the depth below the
     /// top of its column, §4.3). Cells with material points are dense by the paper's ansatz;
     /// fixed grains and walls are too.
-    fn signed_distance(&self, disks: &[([f64; 3], f64)]) -> Vec<f64> {
+    fn signed_distance<S: Space>(&self, disks: &[([f64; 3], f64)]) -> Vec<f64> {
         let (cells, dim, s) = (self.input.cells, self.dim, self.s);
         let mut field = packing_fraction(cells, dim, disks, 4);
         let mut fixed = vec![false; self.count];
@@ -257,10 +262,88 @@ impl<'a> Epoch<'a> {
                 *f = 1.0;
             }
         }
+        if s.max_inertial > 0.0 {
+            // Flowing material is not dense: the zones measure from the quasi-static region.
+            let inertial = self.inertial_numbers::<S>(&field);
+            for (c, f) in field.iter_mut().enumerate() {
+                if inertial[c] > s.max_inertial && !fixed[c] && !self.is_solid(c) {
+                    *f = 0.0;
+                }
+            }
+        }
         match s.layered {
             Some(up) => column_depth(cells, dim, &field, s.critical_packing, up),
             None => distance_to_level(cells, dim, &field, s.critical_packing),
         }
+    }
+
+    /// The inertial number I = γ̇ d √(ρ_s / p) of the material in every cell (GDR MiDi 2004):
+    /// γ̇ the shear rate of the grains' and points' velocity on the nodes (their mass-weighted
+    /// mean, with the MPM's kernel; finite differences over each cell's corners, 0 where a
+    /// corner carries no material), d the mean grain diameter, ρ_s the grains' density and p
+    /// the weight of the material above the cell's centre: bulk density × |g| × the depth
+    /// below the top of its column in `dense` (a field of the cells' packing), at least one
+    /// grain diameter deep.
+    fn inertial_numbers<S: Space>(&self, dense: &[f64]) -> Vec<f64> {
+        let (input, s, dim) = (self.input, self.s, self.dim);
+        let nodes = input.nodes;
+        // Velocity on the nodes: Σ w m v / Σ w m over grains (fixed ones left out) and points.
+        let mut acc: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
+        let items = input
+            .grains
+            .iter()
+            .filter(|g| !g.fixed)
+            .map(|g| (g.x, g.mass, g.v))
+            .chain(input.points.iter().map(|p| (p.x, p.mass, p.v)));
+        for (x, m, v) in items {
+            for_each_node::<S>(nodes, input.kernel, S::from_array(x), |node, w, _| {
+                let e = acc.entry(node).or_insert((0.0, [0.0; 3]));
+                e.0 += w * m;
+                for k in 0..3 {
+                    e.1[k] += w * m * v[k];
+                }
+            });
+        }
+        let velocity = |ijk: [usize; 3]| -> Option<[f64; 3]> {
+            let n = nodes.index([ijk[0] as i64, ijk[1] as i64, ijk[2] as i64])?;
+            let &(m, p) = acc.get(&n)?;
+            (m > 0.0).then(|| p.map(|x| x / m))
+        };
+        let g = s.gravity;
+        let g_norm = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let axis = (0..3).max_by(|&a, &b| g[a].abs().total_cmp(&g[b].abs())).unwrap_or(1);
+        let depth = column_depth(input.cells, dim, dense, s.critical_packing, (axis, -g[axis].signum()));
+        let d = 2.0 * s.radius_mean;
+        let h = input.cells.h;
+        let corners = 1usize << dim;
+        (0..self.count)
+            .map(|c| {
+                let ijk = [c % self.n[0], (c / self.n[0]) % self.n[1], c / (self.n[0] * self.n[1])];
+                // ∂v_a/∂x_b from the differences of the corners along b, averaged.
+                let mut l = [[0.0; 3]; 3];
+                for b in 0..dim {
+                    let mut sum = [0.0; 3];
+                    for corner in 0..corners {
+                        if corner & (1 << b) != 0 {
+                            continue;
+                        }
+                        let at = |bit: usize| std::array::from_fn(|k| ijk[k] + ((bit >> k) & 1));
+                        let (Some(lo), Some(hi)) = (velocity(at(corner)), velocity(at(corner | (1 << b)))) else {
+                            return 0.0;
+                        };
+                        for a in 0..3 {
+                            sum[a] += hi[a] - lo[a];
+                        }
+                    }
+                    for (a, row) in l.iter_mut().enumerate() {
+                        row[b] = sum[a] / (h * (corners / 2) as f64);
+                    }
+                }
+                let rate = grains_grid::gradient::Gradient(l).shear_rate(dim);
+                let p = s.bulk_density * g_norm * depth[c].max(d);
+                if p > 0.0 { rate * d * (s.grain_density / p).sqrt() } else { 0.0 }
+            })
+            .collect()
     }
 
     /// Alg. 8: the zone of every cell from its distance (φ0, r_h), except that no cell jumps
@@ -797,7 +880,67 @@ mod tests {
             attempts: 30,
             weight: W,
             grain_density: 2500.0,
+            max_inertial: 0.0,
+            gravity: [0.0, -9.81, 0.0],
         }
+    }
+
+    /// A continuum block over [0, 40] × [0, 30] mm whose top 10 mm shear (v_x = γ̇ (y −
+    /// 20 mm), γ̇ = 10 /s: inertial number ≈ 0.05 a few millimetres down) on 20 mm at rest.
+    /// With `max_inertial` = 1e-3 the sheared layer counts as not dense: the zones are measured
+    /// from the top of the resting part, and the sheared cells that the top surface alone
+    /// leaves continuum (deeper than φ0 + r_h = 8 mm) go towards discrete (hybrid, the first
+    /// step from continuum); the resting part's cells deep below stay continuum.
+    #[test]
+    fn flowing_material_counts_as_a_free_surface() {
+        let (nodes, cells) = grids();
+        let count = cells.nodes[0] as usize * cells.nodes[1] as usize;
+        let mut points = Vec::new();
+        let sp = 0.5 * H;
+        for j in 0..60 {
+            for i in 0..80 {
+                let x = [0.5 * sp + i as f64 * sp, 0.5 * sp + j as f64 * sp, 0.0];
+                let v = [10.0 * (x[1] - 0.02).max(0.0), 0.0, 0.0];
+                points.push(Point {
+                    id: points.len() as u64,
+                    x,
+                    mass: 2500.0 * 0.82 * sp * sp,
+                    share: 1.0,
+                    v,
+                });
+            }
+        }
+        let previous: Vec<Zone> = (0..count)
+            .map(|c| {
+                let (i, j) = (c % cells.nodes[0] as usize, c / cells.nodes[0] as usize);
+                if i < 20 && j < 15 { Zone::Continuum } else { Zone::Discrete }
+            })
+            .collect();
+        let zones_with = |max_inertial: f64| {
+            let s = Settings {
+                max_inertial,
+                ..settings()
+            };
+            let input = Inputs {
+                nodes: &nodes,
+                kernel: Kernel::Gimp { half_width: 0.25 * H },
+                cells: &cells,
+                previous: &previous,
+                solid: &[],
+                clearance: &|_| f64::INFINITY,
+                grains: &[],
+                points: &points,
+                stress: &BTreeMap::new(),
+            };
+            plan::<D2>(&input, &s, (0, 1 << 20), &mut Rng::new(1)).zones
+        };
+        let cell = |i: usize, j: usize| j * cells.nodes[0] as usize + i;
+        let (off, on) = (zones_with(0.0), zones_with(1e-3));
+        // Row 10 (20–22 mm, sheared, 8–10 mm below the top): continuum by the top surface alone.
+        assert_eq!(off[cell(10, 10)], Zone::Continuum);
+        assert_eq!(on[cell(10, 10)], Zone::Hybrid);
+        // Row 2 (4–6 mm, at rest, well below the resting part's top): continuum either way.
+        assert_eq!((off[cell(10, 2)], on[cell(10, 2)]), (Zone::Continuum, Zone::Continuum));
     }
 
     fn disk_mass(r: f64) -> f64 {

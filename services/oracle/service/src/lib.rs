@@ -96,6 +96,8 @@ pub fn settings(scene: &Scene) -> Option<Settings> {
         attempts: 30,
         weight: c.weight,
         grain_density: material.density,
+        max_inertial: o.map_or(0.0, |o| o.max_inertial),
+        gravity: g,
     })
 }
 
