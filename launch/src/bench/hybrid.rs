@@ -174,9 +174,10 @@ pub fn bench(args: &HybridArgs) -> anyhow::Result<()> {
         o
     })?);
     for &h in &args.cells {
-        let mut kinds = vec![("layered zones", Vec::<String>::new())];
+        // oracle.every counts macro-steps of run.dt's bound: 1 ms.
+        let mut kinds = vec![("layered zones", vec!["oracle.kind=\"fixed\"".to_string()])];
         if args.surface {
-            kinds.push(("surface oracle", vec!["oracle.kind=\"surface\"".into(), "oracle.every=200".into()]));
+            kinds.push(("surface oracle", vec!["oracle.kind=\"surface\"".into(), "oracle.every=1".into()]));
         }
         for (kind, extra) in kinds {
             let mut o = base.clone();
@@ -189,12 +190,7 @@ pub fn bench(args: &HybridArgs) -> anyhow::Result<()> {
                 // Two cells of room under and left of the material for the MPM's wall layers.
                 format!("domain.min=[{},{}]", -3.0 * h, -3.0 * h),
             ]);
-            // oracle.every counts macro-steps of run.dt's bound: 1 ms.
-            o.extend(
-                extra
-                    .into_iter()
-                    .map(|e| if e == "oracle.every=200" { "oracle.every=1".into() } else { e }),
-            );
+            o.extend(extra);
             o.extend(args.hybrid_overrides.iter().cloned());
             rows.push(one(
                 args,
