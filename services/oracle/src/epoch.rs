@@ -299,8 +299,8 @@ impl<'a> Epoch<'a> {
             for_each_node::<S>(nodes, input.kernel, S::from_array(x), |node, w, _| {
                 let e = acc.entry(node).or_insert((0.0, [0.0; 3]));
                 e.0 += w * m;
-                for k in 0..3 {
-                    e.1[k] += w * m * v[k];
+                for (p, vk) in e.1.iter_mut().zip(v) {
+                    *p += w * m * vk;
                 }
             });
         }
