@@ -885,8 +885,9 @@ mod tests {
         }
     }
 
-    /// A continuum block over [0, 40] × [0, 30] mm whose top 10 mm shear (v_x = γ̇ (y −
-    /// 20 mm), γ̇ = 10 /s: inertial number ≈ 0.05 a few millimetres down) on 20 mm at rest.
+    /// A continuum filling the grid (48 × 32 mm; its points run beyond it) whose part above
+    /// y = 20 mm shears (v_x = γ̇ (y − 20 mm), γ̇ = 10 /s: inertial number ≈ 0.05 a few
+    /// millimetres down) on 20 mm at rest.
     /// With `max_inertial` = 1e-3 the sheared layer counts as not dense: the zones are measured
     /// from the top of the resting part, and the sheared cells that the top surface alone
     /// leaves continuum (deeper than φ0 + r_h = 8 mm) go towards discrete (hybrid, the first
@@ -936,11 +937,64 @@ mod tests {
         };
         let cell = |i: usize, j: usize| j * cells.nodes[0] as usize + i;
         let (off, on) = (zones_with(0.0), zones_with(1e-3));
-        // Row 10 (20–22 mm, sheared, 8–10 mm below the top): continuum by the top surface alone.
+        // Row 10 (20–22 mm, sheared, 10–12 mm below the top): continuum by the top surface alone.
         assert_eq!(off[cell(10, 10)], Zone::Continuum);
         assert_eq!(on[cell(10, 10)], Zone::Hybrid);
         // Row 2 (4–6 mm, at rest, well below the resting part's top): continuum either way.
         assert_eq!((off[cell(10, 2)], on[cell(10, 2)]), (Zone::Continuum, Zone::Continuum));
+    }
+
+    /// The inertial number of a uniform simple shear v_x = γ̇ y (γ̇ = 10 /s) of points filling
+    /// [0, 40] × [0, 30] mm against its definition: I = γ̇ d √(ρ_s / p), p = ρ_b |g| z at the
+    /// depth z of the cell's centre below the top (30 mm). Interior cells within 0.5%; a cell
+    /// beside the material (44-46 mm: corners without mass) has none.
+    #[test]
+    fn inertial_number_of_a_simple_shear() {
+        let (nodes, cells) = grids();
+        let (nx, count) = (cells.nodes[0] as usize, cells.nodes[0] as usize * cells.nodes[1] as usize);
+        let sp = 0.5 * H;
+        let rate = 10.0;
+        let mut points = Vec::new();
+        for j in 0..30 {
+            for i in 0..40 {
+                let x = [0.5 * sp + i as f64 * sp, 0.5 * sp + j as f64 * sp, 0.0];
+                points.push(Point {
+                    id: points.len() as u64,
+                    x,
+                    mass: 2500.0 * 0.82 * sp * sp,
+                    share: 1.0,
+                    v: [rate * x[1], 0.0, 0.0],
+                });
+            }
+        }
+        let dense: Vec<f64> = (0..count).map(|c| if c / nx < 15 { 1.0 } else { 0.0 }).collect();
+        let previous = vec![Zone::Continuum; count];
+        let s = settings();
+        let input = Inputs {
+            nodes: &nodes,
+            kernel: Kernel::Gimp { half_width: 0.25 * H },
+            cells: &cells,
+            previous: &previous,
+            solid: &[],
+            clearance: &|_| f64::INFINITY,
+            grains: &[],
+            points: &points,
+            stress: &BTreeMap::new(),
+        };
+        let inertial = Epoch::new(&input, &s, 2).inertial_numbers::<D2>(&dense);
+        for j in 2..13 {
+            for i in 2..18 {
+                let depth = 0.030 - (j as f64 + 0.5) * H;
+                let p = s.bulk_density * 9.81 * depth;
+                let expected = rate * 2.0 * R * (s.grain_density / p).sqrt();
+                let got = inertial[j * nx + i];
+                assert!(
+                    (got / expected - 1.0).abs() < 5e-3,
+                    "cell ({i}, {j}): I = {got}, expected {expected}"
+                );
+            }
+        }
+        assert_eq!(inertial[5 * nx + 22], 0.0);
     }
 
     fn disk_mass(r: f64) -> f64 {
