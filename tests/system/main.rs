@@ -781,8 +781,19 @@ fn a_translating_hybrid_block_keeps_its_shape() {
 /// seeds 6 and 7 (0.24 d).
 #[test]
 fn a_hybrid_layer_at_rest_stays_at_rest() {
+    layer_stays_at_rest(grains_protocol::scene::GrainTransfer::Flip);
+}
+
+/// The same with Yue 2018 Alg. 5-6 as written (`"pic"`: the band grains move with the grid),
+/// the transfer of the paper's method (issue 21).
+#[test]
+fn a_hybrid_layer_at_rest_stays_at_rest_with_the_papers_transfer() {
+    layer_stays_at_rest(grains_protocol::scene::GrainTransfer::Pic);
+}
+
+fn layer_stays_at_rest(transfer: grains_protocol::scene::GrainTransfer) {
     use grains_service::solver::Solver;
-    let mut h = Hybrid::load("tests/scenes/hybrid_pile_2d.toml");
+    let mut h = Hybrid::load_with("tests/scenes/hybrid_pile_2d.toml", |s| s.coupling.grain_transfer = transfer);
     let surface = |h: &Hybrid| {
         let g = &h.dem.state.grains;
         let mut top = [f64::NEG_INFINITY; 20];
@@ -819,7 +830,7 @@ fn a_hybrid_layer_at_rest_stays_at_rest() {
         .map(|(b, a)| (a - b).abs())
         .fold(0.0, f64::max);
     eprintln!(
-        "free surface moved by at most {moved:.3e} m over 0.5 s; kinetic energy {:.3e} J (peak {peak:.3e} J, m g d {m_g_d:.3e} J)",
+        "{transfer:?}: free surface moved by at most {moved:.3e} m over 0.5 s; kinetic energy {:.3e} J (peak {peak:.3e} J, m g d {m_g_d:.3e} J)",
         h.kinetic_energy()
     );
     assert!(moved < 0.1 * 1e-3, "the free surface moved by {moved} m");
