@@ -896,21 +896,7 @@ mod tests {
     fn flowing_material_counts_as_a_free_surface() {
         let (nodes, cells) = grids();
         let count = cells.nodes[0] as usize * cells.nodes[1] as usize;
-        let mut points = Vec::new();
-        let sp = 0.5 * H;
-        for j in 0..60 {
-            for i in 0..80 {
-                let x = [0.5 * sp + i as f64 * sp, 0.5 * sp + j as f64 * sp, 0.0];
-                let v = [10.0 * (x[1] - 0.02).max(0.0), 0.0, 0.0];
-                points.push(Point {
-                    id: points.len() as u64,
-                    x,
-                    mass: 2500.0 * 0.82 * sp * sp,
-                    share: 1.0,
-                    v,
-                });
-            }
-        }
+        let points = block_of_points(80, 60, |x| [10.0 * (x[1] - 0.02).max(0.0), 0.0, 0.0]);
         let previous: Vec<Zone> = (0..count)
             .map(|c| {
                 let (i, j) = (c % cells.nodes[0] as usize, c / cells.nodes[0] as usize);
@@ -952,21 +938,8 @@ mod tests {
     fn inertial_number_of_a_simple_shear() {
         let (nodes, cells) = grids();
         let (nx, count) = (cells.nodes[0] as usize, cells.nodes[0] as usize * cells.nodes[1] as usize);
-        let sp = 0.5 * H;
         let rate = 10.0;
-        let mut points = Vec::new();
-        for j in 0..30 {
-            for i in 0..40 {
-                let x = [0.5 * sp + i as f64 * sp, 0.5 * sp + j as f64 * sp, 0.0];
-                points.push(Point {
-                    id: points.len() as u64,
-                    x,
-                    mass: 2500.0 * 0.82 * sp * sp,
-                    share: 1.0,
-                    v: [rate * x[1], 0.0, 0.0],
-                });
-            }
-        }
+        let points = block_of_points(40, 30, |x| [rate * x[1], 0.0, 0.0]);
         let dense: Vec<f64> = (0..count).map(|c| if c / nx < 15 { 1.0 } else { 0.0 }).collect();
         let previous = vec![Zone::Continuum; count];
         let s = settings();
@@ -995,6 +968,23 @@ mod tests {
             }
         }
         assert_eq!(inertial[5 * nx + 22], 0.0);
+    }
+
+    /// Material points on a square lattice of spacing H / 2 from the origin, `columns` × `rows`
+    /// (packing 0.82 of density 2500), with the velocity `v` of their position.
+    fn block_of_points(columns: usize, rows: usize, v: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<Point> {
+        let sp = 0.5 * H;
+        (0..rows)
+            .flat_map(|j| (0..columns).map(move |i| [0.5 * sp + i as f64 * sp, 0.5 * sp + j as f64 * sp, 0.0]))
+            .enumerate()
+            .map(|(k, x)| Point {
+                id: k as u64,
+                x,
+                mass: 2500.0 * 0.82 * sp * sp,
+                share: 1.0,
+                v: v(x),
+            })
+            .collect()
     }
 
     fn disk_mass(r: f64) -> f64 {
