@@ -315,6 +315,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         bridge,
         synthetic,
     };
+    periodic_fits(ctx, &raw, &scene)?;
     if scene.coupling.auto.is_some() && (scene.synthetic.is_some() || !scene.participants().contains(&Role::Coupler)) {
         let span = raw.coupling.as_ref().and_then(|c| c.substeps.as_ref()).map(|s| s.span());
         return Err(ctx.err(
@@ -324,6 +325,42 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         ));
     }
     Ok(scene)
+}
+
+/// A periodic axis of a scene with a continuum: the MPM's grid wraps around, so the period
+/// must be a whole number of cells; the adaptive oracles' surface searches do not wrap, so
+/// a coupled periodic scene keeps its zones fixed.
+fn periodic_fits(ctx: &Ctx, raw: &raw::RawScene, scene: &Scene) -> Result<(), SceneError> {
+    let Some(span) = raw.domain.periodic.as_ref().map(|p| p.span()) else {
+        return Ok(());
+    };
+    let roles = scene.participants();
+    if !roles.contains(&Role::Mpm) {
+        return Ok(());
+    }
+    let d = &scene.domain;
+    for k in (0..scene.dim()).filter(|&k| d.periodic[k]) {
+        let cells = (d.max[k] - d.min[k]) / d.cell_size;
+        if (cells - cells.round()).abs() > 1e-6 * cells.max(1.0) {
+            return Err(ctx.err(
+                Some(span),
+                Some("domain.periodic"),
+                format!(
+                    "a periodic axis of a scene with a continuum must be a whole number of cells long: axis {k} is {:.6} cells of `domain.cell_size` {} m (make `domain.max` − `domain.min` a multiple of it)",
+                    cells, d.cell_size
+                ),
+            ));
+        }
+    }
+    if roles.contains(&Role::Coupler) && scene.oracle.as_ref().is_some_and(|o| o.kind != OracleKind::Fixed) {
+        let span = raw.oracle.as_ref().map(|o| o.kind.span()).unwrap_or(span);
+        return Err(ctx.err(
+            Some(span),
+            Some("oracle.kind"),
+            "a hybrid scene on a periodic domain needs `kind = \"fixed\"` (the layered and surface oracles do not yet look across a periodic boundary)".into(),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -457,6 +494,28 @@ mod tests {
     fn duration_gives_the_step_count() {
         let s = from_str(&GOOD.replace("steps = 10", "duration = 0.01"), Path::new("g.toml"), 0).unwrap();
         assert_eq!(s.steps, 100);
+    }
+
+    /// The shipped periodic chute validates; a period that is not a whole number of cells
+    /// and an adaptive oracle across the periodic boundary are refused, naming the field.
+    #[test]
+    fn a_periodic_continuum_needs_whole_cells_and_fixed_zones() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/chute_hybrid_2d.toml");
+        let (s, _) = load_with_overrides(&path, &[]).unwrap();
+        assert_eq!(s.domain.periodic, [true, false, false]);
+        let e = load_with_overrides(&path, &["domain.max=[0.201,0.08]".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("domain.periodic"), "{e}");
+        assert!(e.to_string().contains("100.500000 cells"), "{e}");
+        let e = load_with_overrides(&path, &["oracle={kind=\"surface\"}".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("oracle.kind"), "{e}");
+        // A DEM-only periodic domain needs neither.
+        let dem = [
+            "domain.max=[0.201,0.08]".into(),
+            "body.0.model=\"dem\"".into(),
+            "coupling.substeps=1".into(),
+            "run.dt=5e-6".into(),
+        ];
+        load_with_overrides(&path, &dem).unwrap();
     }
 
     #[test]

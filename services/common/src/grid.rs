@@ -9,7 +9,7 @@ use grains_protocol::scene::{MpmKernel, Scene};
 /// half-width h / (2 · points per axis), or quadratic B-splines).
 pub fn scene_grid(scene: &Scene) -> (Grid, Kernel) {
     let h = scene.domain.cell_size;
-    let grid = Grid::covering(scene.domain.min, scene.domain.max, h, scene.dim());
+    let grid = Grid::covering(scene.domain.min, scene.domain.max, h, scene.dim()).with_periodic(scene.domain.periodic);
     let kernel = match scene.mpm.kernel {
         MpmKernel::Gimp => Kernel::Gimp {
             half_width: 0.5 * h / scene.mpm.points_per_axis as f64,

@@ -22,7 +22,7 @@ use crate::coupling::{NodeMomentum, Stencils};
 use crate::pipeline::DemPipeline;
 use crate::space::Space;
 use crate::state::DemState;
-use grains_grid::{Grid, Kernel};
+use grains_grid::{Grid, Kernel, Vector};
 
 /// How a hybrid grain takes the coupler's node velocities back (Alg. 5–6).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -221,6 +221,7 @@ impl<S: Space> CoupledStep<S> {
         // node goes back to its uncoupled velocity: the part of the push spread there is
         // taken back.
         let change = |k: usize| Some(fixed[k].unwrap_or(free[k]) - own[k]);
+        let (lo, hi, period) = state.params.domain.wrap_box::<S>();
         let g = &mut state.grains;
         for (k, (&i, &x0)) in self.hybrid.iter().zip(&self.saved).enumerate() {
             let i = i as usize;
@@ -248,6 +249,7 @@ impl<S: Space> CoupledStep<S> {
                 g.omega[i] = grad.spin::<S>();
                 g.x[i] = x0 + v * dt;
             }
+            g.x[i] = g.x[i].wrap(lo, hi, period);
         }
         pipeline.moved();
     }

@@ -23,6 +23,9 @@ pub struct Grid {
     pub h: f64,
     /// Nodes per axis (1 on unused axes).
     pub nodes: [u64; 3],
+    /// Cells per period along a periodic axis (0 on open axes): node i and node i + period
+    /// are one node, numbered i mod period, so the last node of the covering is never used.
+    pub period: [u64; 3],
 }
 
 impl Grid {
@@ -32,12 +35,36 @@ impl Grid {
         for k in 0..dim {
             nodes[k] = ((max[k] - min[k]) / h).ceil() as u64 + 1;
         }
-        Grid { origin: min, h, nodes }
+        Grid {
+            origin: min,
+            h,
+            nodes,
+            period: [0; 3],
+        }
     }
 
-    /// Linear index of node (i, j, k), or `None` outside the grid.
+    /// The same grid wrapping around along the `periodic` axes (whose length must be a whole
+    /// number of cells: checked by the scene).
+    pub fn with_periodic(mut self, periodic: [bool; 3]) -> Self {
+        for k in 0..3 {
+            self.period[k] = if periodic[k] && self.nodes[k] > 1 { self.nodes[k] - 1 } else { 0 };
+        }
+        self
+    }
+
+    /// Node (i, j, k) with its periodic components brought into [0, period).
+    #[inline(always)]
+    pub fn wrap(&self, ijk: [i64; 3]) -> [i64; 3] {
+        [0, 1, 2].map(|k| match self.period[k] {
+            0 => ijk[k],
+            p => ijk[k].rem_euclid(p as i64),
+        })
+    }
+
+    /// Linear index of node (i, j, k) (wrapped on periodic axes), or `None` outside the grid.
     #[inline]
     pub fn index(&self, ijk: [i64; 3]) -> Option<u64> {
+        let ijk = self.wrap(ijk);
         let mut idx = 0u64;
         for k in (0..3).rev() {
             if ijk[k] < 0 || ijk[k] as u64 >= self.nodes[k] {

@@ -322,15 +322,14 @@ impl<S: MpmSpace> MpmPipeline<S> {
         let per = pts.len().div_ceil(chunks);
         let map = &self.map;
         let bn = map.block_nodes();
-        // The slots a range of points writes: from the block of the lowest stencil start to the
-        // end of the block of the highest stencil end (slots follow block order).
+        // The slots a range of points writes: from the block of the lowest stencil slot to the
+        // end of the block of the highest (slots follow block order).
         let slot_range = |range: std::ops::Range<usize>| {
             let (mut lo, mut hi) = (usize::MAX, 0);
             for p in range {
-                let s = stencil_start::<S>(grid, &weights, pts.x[p]);
-                lo = lo.min(map.slot(s));
-                let end = [0, 1, 2].map(|k| if k < S::DIM { s[k] + 2 } else { 0 });
-                hi = hi.max(map.slot(end));
+                let (a, b) = map.stencil_slots(stencil_start::<S>(grid, &weights, pts.x[p]));
+                lo = lo.min(a);
+                hi = hi.max(b);
             }
             (lo / bn * bn, (hi / bn + 1) * bn)
         };
@@ -459,13 +458,16 @@ impl<S: MpmSpace> MpmPipeline<S> {
         let grid = &params.grid;
         let (map, vel) = (&self.map, &self.velocity);
         let weights = Weights::new(params.kernel, grid.h);
-        // Points must keep one cell between them and the outer nodes (see DOMAIN_WALL_NODES).
+        // Points must keep one cell between them and the outer nodes (see DOMAIN_WALL_NODES);
+        // along a periodic axis they wrap around instead.
         let lo = S::from_array([0, 1, 2].map(|k| grid.origin[k] + grid.h));
         let hi = S::from_array([0, 1, 2].map(|k| grid.origin[k] + grid.h * (grid.nodes[k] as f64 - 2.0)));
         let inside = |x: S::V| {
             let (x, lo, hi) = (S::to_array(x), S::to_array(lo), S::to_array(hi));
-            (0..S::DIM).all(|k| x[k] >= lo[k] && x[k] <= hi[k])
+            (0..S::DIM).all(|k| grid.period[k] > 0 || (x[k] >= lo[k] && x[k] <= hi[k]))
         };
+        let periodic = grid.period.iter().any(|&p| p > 0);
+        let (box_lo, box_hi, period) = periodic_box::<S>(grid);
         let gimp_d = matches!(params.kernel, Kernel::Gimp { .. });
         let d_inv_bspline = 4.0 / (grid.h * grid.h);
         let zero = S::M::identity() * 0.0;
@@ -515,6 +517,9 @@ impl<S: MpmSpace> MpmPipeline<S> {
                     bs[k] = S::mul(&S::mul(&f, &bs[k]), &S::transpose(&f));
                     js[k] *= f.det();
                     xs[k] = xp + v_pic * dt;
+                    if periodic {
+                        xs[k] = xs[k].wrap(box_lo, box_hi, period);
+                    }
                     if !(vs[k].is_finite() && xs[k].is_finite()) {
                         return Some(StepError::NotFinite {
                             phase: Phase::G2p,
@@ -585,11 +590,26 @@ impl<S: MpmSpace> MpmPipeline<S> {
     }
 }
 
+/// The periodic box of a grid for [`Vector::wrap`]: its bounds and periods on periodic axes
+/// (±∞ and 0 on open ones, which never wrap).
+fn periodic_box<S: Space>(grid: &Grid) -> (S::V, S::V, S::V) {
+    let (mut lo, mut hi, mut p) = ([f64::NEG_INFINITY; 3], [f64::INFINITY; 3], [0.0; 3]);
+    for k in 0..S::DIM {
+        if grid.period[k] > 0 {
+            p[k] = grid.h * grid.period[k] as f64;
+            lo[k] = grid.origin[k];
+            hi[k] = grid.origin[k] + p[k];
+        }
+    }
+    (S::from_array(lo), S::from_array(hi), S::from_array(p))
+}
+
 #[inline]
 fn apply_walls<S: MpmSpace>(params: &MpmParams<S>, ijk: [i64; 3], v: S::V, time: f64) -> S::V {
     let mut v = v;
     if let Some(contact) = params.domain_walls {
-        for k in 0..S::DIM {
+        // No wall across a periodic axis.
+        for k in (0..S::DIM).filter(|&k| params.grid.period[k] == 0) {
             let n = params.grid.nodes[k] as i64;
             let mut normal = [0.0; 3];
             if ijk[k] < DOMAIN_WALL_NODES {

@@ -18,6 +18,9 @@ pub struct BlockMap {
     blocks: [usize; 3],
     /// Nodes per axis of the grid.
     nodes: [i64; 3],
+    /// Nodes per period on periodic axes (0 on open ones; see [`Grid::period`]).
+    period: [i64; 3],
+    periodic: bool,
     dim: usize,
     /// Block → slot (INACTIVE when not stored).
     page: Vec<u32>,
@@ -34,6 +37,8 @@ impl BlockMap {
         BlockMap {
             blocks,
             nodes: grid.nodes.map(|n| n as i64),
+            period: grid.period.map(|n| n as i64),
+            periodic: grid.period.iter().any(|&p| p > 0),
             dim,
             page: vec![INACTIVE; blocks.iter().product()],
             active: Vec::new(),
@@ -65,30 +70,47 @@ impl BlockMap {
         self.page.len()
     }
 
+    /// Node (i, j, k) with its periodic components brought into [0, period).
+    #[inline(always)]
+    pub fn wrap(&self, ijk: [i64; 3]) -> [i64; 3] {
+        if !self.periodic {
+            return ijk;
+        }
+        [0, 1, 2].map(|k| self.wrap_axis(k, ijk[k]))
+    }
+
     /// Rebuilds the active set: `stencil_starts` yields the first node (i, j, k) of every point's
-    /// 3-node stencil; the blocks of all 3^d nodes become active. Fails with the position in the
-    /// sequence of the first stencil that does not lie inside the grid.
+    /// 3-node stencil; the blocks of all 3^d nodes (wrapped on periodic axes) become active.
+    /// Fails with the position in the sequence of the first stencil that does not lie inside
+    /// the grid.
     pub fn rebuild(&mut self, stencil_starts: impl Iterator<Item = [i64; 3]>) -> Result<(), usize> {
         self.page.fill(INACTIVE);
         self.active.clear();
-        let reach = |s: i64| [s >> SHIFT, (s + 2) >> SHIFT];
+        // Per axis the blocks of the stencil's three nodes (on a periodic axis they may be
+        // three different blocks: the last, partly used block and the first).
+        let period = self.period;
+        let blocks = |k: usize, s: i64| {
+            [0, 1, 2].map(|a| {
+                let i = s + a;
+                (if period[k] > 0 { i.rem_euclid(period[k]) } else { i }) >> SHIFT
+            })
+        };
         // Points come sorted by block: most stencils start in the same block as the last one.
-        let mut last = [i64::MIN; 3];
+        let mut last = [[i64::MIN; 3]; 3];
         for (p, start) in stencil_starts.enumerate() {
-            if (0..self.dim).any(|k| start[k] < 0 || start[k] + 2 >= self.nodes[k]) {
+            if (0..self.dim).any(|k| self.period[k] == 0 && (start[k] < 0 || start[k] + 2 >= self.nodes[k])) {
                 self.page.fill(INACTIVE);
                 return Err(p);
             }
-            let (bx, by, bz) = (reach(start[0]), reach(start[1]), reach(start[2]));
-            let key = [bx[0] + (bx[1] << 32), by[0] + (by[1] << 32), bz[0] + (bz[1] << 32)];
+            let key = [blocks(0, start[0]), blocks(1, start[1]), blocks(2, start[2])];
             if key == last {
                 continue;
             }
             last = key;
-            let nz = if self.dim == 3 { 2 } else { 1 };
-            for c in &bz[..nz] {
-                for b in &by {
-                    for a in &bx {
+            let nz = if self.dim == 3 { 3 } else { 1 };
+            for c in &key[2][..nz] {
+                for b in &key[1] {
+                    for a in &key[0] {
                         let blk = *a as usize + self.blocks[0] * (*b as usize + self.blocks[1] * *c as usize);
                         // Mark first; slots are assigned in block order below.
                         self.page[blk] = 0;
@@ -108,12 +130,14 @@ impl BlockMap {
     /// Index of the block holding node (i, j, k) (blocks numbered x fastest, as slots are).
     #[inline(always)]
     pub fn block_index(&self, ijk: [i64; 3]) -> usize {
+        let ijk = self.wrap(ijk);
         (ijk[0] >> SHIFT) as usize + self.blocks[0] * ((ijk[1] >> SHIFT) as usize + self.blocks[1] * (ijk[2] >> SHIFT) as usize)
     }
 
     /// Storage index of node (i, j, k); the node's block must be active.
     #[inline(always)]
     pub fn slot(&self, ijk: [i64; 3]) -> usize {
+        let ijk = self.wrap(ijk);
         let blk = self.block_index(ijk);
         let local = (ijk[0] & (BLOCK - 1)) + BLOCK * ((ijk[1] & (BLOCK - 1)) + BLOCK * (ijk[2] & (BLOCK - 1)));
         let page = self.page[blk];
@@ -121,9 +145,28 @@ impl BlockMap {
         ((page as usize) << (SHIFT as usize * self.dim)) + local as usize
     }
 
+    /// The lowest and the highest storage index of the 3^d nodes of the stencil starting at
+    /// `start` (slots follow block order, x fastest, so they are those of the corners of
+    /// per-axis lowest and highest wrapped nodes); its blocks must be active.
+    pub fn stencil_slots(&self, start: [i64; 3]) -> (usize, usize) {
+        let (mut lo, mut hi) = (start, start);
+        for k in 0..self.dim {
+            let n = [0, 1, 2].map(|a| self.wrap_axis(k, start[k] + a));
+            lo[k] = n[0].min(n[1]).min(n[2]);
+            hi[k] = n[0].max(n[1]).max(n[2]);
+        }
+        (self.slot(lo), self.slot(hi))
+    }
+
+    #[inline(always)]
+    fn wrap_axis(&self, k: usize, i: i64) -> i64 {
+        if self.period[k] > 0 { i.rem_euclid(self.period[k]) } else { i }
+    }
+
     /// Storage index of node (i, j, k), or `None` when it is outside the grid or its block is
     /// not stored.
     pub fn try_slot(&self, ijk: [i64; 3]) -> Option<usize> {
+        let ijk = self.wrap(ijk);
         if (0..self.dim).any(|k| ijk[k] < 0 || ijk[k] >= self.nodes[k]) {
             return None;
         }
@@ -167,5 +210,27 @@ mod tests {
             assert_eq!(map.ijk(s), ijk);
         }
         assert!(map.len() < map.domain_blocks() * map.block_nodes() / 10);
+    }
+
+    /// On a periodic axis node i and node i + period are one stored node, and a stencil
+    /// that crosses the end activates the blocks on both sides.
+    #[test]
+    fn a_periodic_axis_wraps_slots_and_stencils() {
+        // 9 cells of 1 along x (period 9: nodes 0..=8; node 9 is node 0), open along y.
+        let grid = Grid::covering([0.0; 3], [9.0, 8.0, 0.0], 1.0, 2).with_periodic([true, false, false]);
+        let mut map = BlockMap::new(&grid, 2);
+        // Starts at x = 7 (nodes 7, 8, 0), at x = −1 (nodes 8, 0, 1); y open.
+        map.rebuild([[7i64, 2, 0], [-1, 2, 0]].into_iter()).unwrap();
+        // x blocks 0, 1, 2 (node 8 is alone in block 2), y blocks 0 and 1.
+        assert_eq!(map.active_blocks(), 6);
+        assert_eq!(map.slot([9, 3, 0]), map.slot([0, 3, 0]));
+        assert_eq!(map.slot([-1, 3, 0]), map.slot([8, 3, 0]));
+        assert_ne!(map.slot([8, 3, 0]), map.slot([0, 3, 0]));
+        assert_eq!(map.ijk(map.slot([-1, 4, 0])), [8, 4, 0]);
+        // The open axis still rejects a stencil beyond the grid.
+        assert_eq!(map.clone().rebuild([[3, 7, 0]].into_iter()), Err(0));
+        // The stencil across the end spans every x block: lowest slot at x = 0, highest at 8.
+        let (lo, hi) = map.stencil_slots([7, 2, 0]);
+        assert_eq!((lo, hi), (map.slot([0, 2, 0]), map.slot([8, 4, 0])));
     }
 }

@@ -251,6 +251,7 @@ mod tests {
             origin: [0.0; 3],
             h,
             nodes: [n, n, 1],
+            period: [0; 3],
         }
     }
 
@@ -322,6 +323,7 @@ mod tests {
                 origin: [0.0; 3],
                 h: 0.1,
                 nodes: [nx, ny, 1],
+                period: [0; 3],
             };
             let (lx, ly) = ((nx - 1) as f64 * g.h, (ny - 1) as f64 * g.h);
             let len = lx.hypot(ly);
@@ -379,6 +381,7 @@ mod tests {
                 origin: [0.0; 3],
                 h,
                 nodes: [n as u64; 3],
+                period: [0; 3],
             };
             let at = |i: usize| [i % n, (i / n) % n, i / (n * n)].map(|k| (k as f64 + 0.5) * h);
             let dist = |i: usize| {
@@ -402,6 +405,7 @@ mod tests {
             origin: [0.0; 3],
             h: 0.1,
             nodes: [20; 3],
+            period: [0; 3],
         };
         let phi = packing_fraction(&g, 3, &[(c0, 0.35)], 8);
         let volume: f64 = phi.iter().sum::<f64>() * 1e-3;
@@ -432,6 +436,7 @@ mod tests {
             origin: [0.0; 3],
             h: 1.0,
             nodes: [4, 6, 1],
+            period: [0; 3],
         };
         let mut f = vec![0.0; 24];
         for (i, j) in [(0, 0), (0, 2), (0, 3), (2, 0), (2, 1), (3, 0), (3, 1)] {

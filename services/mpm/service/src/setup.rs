@@ -67,14 +67,15 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
     }
     let dim = scene.dim();
     let h = scene.domain.cell_size;
-    // The outer three node layers of every domain face are its wall (DOMAIN_WALL_NODES).
+    // The outer three node layers of every domain face are its wall (DOMAIN_WALL_NODES); a
+    // periodic axis has no faces.
     let margin = (DOMAIN_WALL_NODES - 1) as f64 * h;
     for (k, b) in scene.bodies.iter().enumerate().filter(|(_, b)| b.model != BodyModel::Dem) {
         let (lo, hi) = match b.shape {
             Shape::Box { min, max } => (min, max),
             Shape::Ball { center, radius } => (center.map(|c| c - radius), center.map(|c| c + radius)),
         };
-        for a in 0..dim {
+        for a in (0..dim).filter(|&a| !scene.domain.periodic[a]) {
             if lo[a] < scene.domain.min[a] + margin || hi[a] > scene.domain.max[a] - margin {
                 return Err((
                     format!("body.{k}"),
