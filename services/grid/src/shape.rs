@@ -46,8 +46,8 @@ impl Grid {
     /// The same grid wrapping around along the `periodic` axes (whose length must be a whole
     /// number of cells: checked by the scene).
     pub fn with_periodic(mut self, periodic: [bool; 3]) -> Self {
-        for k in 0..3 {
-            self.period[k] = if periodic[k] && self.nodes[k] > 1 { self.nodes[k] - 1 } else { 0 };
+        for ((p, &wraps), &n) in self.period.iter_mut().zip(&periodic).zip(&self.nodes) {
+            *p = if wraps && n > 1 { n - 1 } else { 0 };
         }
         self
     }
