@@ -381,6 +381,70 @@ fn drucker_prager_block_comes_to_rest_no_steeper_than_its_friction_angle() {
     );
 }
 
+/// An infinite slope (Yue 2018 §5's periodic chute as a continuum): a layer of the Drucker–
+/// Prager model on a sticky floor, inclined at θ beyond its friction angle φ, accelerates as a
+/// whole at a = g (sin θ − cos θ sin φ). Equilibrium of the layer above depth z gives
+/// τ_xy / σ_yy = (g sin θ − a) / (g cos θ) at every depth, and in 2D the model yields when
+/// the Mohr circle's radius reaches p sin φ; in steady simple shear the (deviatoric,
+/// coaxial) flow keeps σ_xx = σ_yy, so τ_xy = p sin φ with p = σ_yy. The continuum's chute is
+/// a Coulomb block with friction sin φ: it never reaches the steady flow a grain chute does.
+#[test]
+fn a_continuum_layer_on_an_incline_slides_as_a_coulomb_block() {
+    use grains_mpm::boundary::{Contact, Geometry, Wall};
+    let (h, density, phi, theta) = (0.004, 2075.0, 13.24f64, 22.0f64);
+    let grid = Grid::covering([0.0, -3.0 * h, 0.0], [0.2, 0.08, 0.0], h, 2).with_periodic([true, false, false]);
+    let mut pts = block([0.0, 0.0], [0.2, 0.048], h, 2, density);
+    let g = 9.81;
+    let (st, ct) = (theta.to_radians().sin(), theta.to_radians().cos());
+    let p = MpmParams {
+        grid,
+        kernel: Kernel::Gimp { half_width: 0.25 * h },
+        model: Model::Yue(DruckerPragerYue::new(2.8e5, 0.3, phi, 2)),
+        gravity: DVec2::new(g * st, -g * ct),
+        transfer: Transfer::Flip(1.0),
+        domain_walls: Some(Contact::Slip),
+        walls: vec![Wall {
+            geometry: Geometry::Plane {
+                point: DVec2::ZERO,
+                normal: DVec2::Y,
+            },
+            contact: Contact::Sticky,
+            velocity: DVec2::ZERO,
+            shift: DVec2::ZERO,
+            id: 0,
+        }],
+    };
+    let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
+    let mut pipe = pipeline::<D2>();
+    // The upper half of the layer, by id (the pipeline reorders the points): the floor holds
+    // the material within a cell of it, which does not slide.
+    let upper: Vec<u64> = (0..pts.len()).filter(|&k| pts.x[k].y > 0.024).map(|k| pts.id[k]).collect();
+    let mean_vx = |pts: &Points<D2>| {
+        let v = (0..pts.len())
+            .filter(|&k| upper.binary_search(&pts.id[k]).is_ok())
+            .map(|k| pts.v[k].x);
+        v.sum::<f64>() / upper.len() as f64
+    };
+    // The mean velocity from 0.1 s (the elastic start over) to 0.3 s.
+    let (mut first, mut t) = (None, 0.0);
+    while t < 0.3 {
+        pipe.step(&mut pts, &p, dt).unwrap();
+        t += dt;
+        if first.is_none() && t >= 0.1 {
+            first = Some((t, mean_vx(&pts)));
+        }
+    }
+    let (t1, v1) = first.unwrap();
+    let a = (mean_vx(&pts) - v1) / (t - t1);
+    let expected = g * (st - ct * phi.to_radians().sin());
+    eprintln!(
+        "a = {a:.4} m/s², g (sin θ − cos θ sin φ) = {expected:.4}, with tan φ {:.4}",
+        g * (st - ct * phi.to_radians().tan())
+    );
+    // 1.5%: friction tan φ (Mohr–Coulomb's tangent plane) would be 3.6% slower.
+    assert!((a - expected).abs() < 0.015 * expected, "a = {a} m/s², expected {expected}");
+}
+
 /// Material pulled apart carries no pressure: under extension the Yue model flows freely
 /// (det b^e projected to 1) and the critical-state model returns to its stress-free apex
 /// (cohesionless). A block given a uniform expansion velocity field, no gravity.
