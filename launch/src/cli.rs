@@ -116,6 +116,8 @@ pub enum BenchCmd {
     Hybrid(grains_launch::bench::hybrid::HybridArgs),
     /// MPM µs per point-step of a collapsing sand block, side by side with Taichi.
     Mpm(grains_launch::bench::mpm::MpmArgs),
+    /// Yue 2018 §5's speed-up study: the periodic chute over grain size, DEM fraction and cell.
+    Chute(grains_launch::bench::chute::ChuteArgs),
 }
 
 fn parse_role(s: &str) -> Result<Role, String> {

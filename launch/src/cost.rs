@@ -1,6 +1,6 @@
 //! What a scene will cost before it runs: a model of the wall time of a hybrid run and of the
 //! pure DEM run it replaces, with costs per grain-step, per point-step and per macro-step
-//! measured by `grains bench hybrid` on this kind of machine (Yue 2018 §5, eqs. 21–23, in
+//! measured by `grains bench chute` on this kind of machine (Yue 2018 §5, eqs. 21–23, in
 //! the terms of grains' processes).
 //!
 //! A hybrid macro-step runs the DEM's k substeps over its N_D grains (discrete and band) and
@@ -28,16 +28,18 @@ pub struct Costs {
     pub step: f64,
 }
 
-/// Measured on a 2-core machine of this project's kind, on the column of `grains bench hybrid`
-/// (0.3 × 0.4 m, 99,092 grains; hybrid on 4-mm cells, k = 80, 5,175 grains and 29,156
-/// points, from `metrics.csv`: the DEM's 15.0 ms and the MPM's 10.3 ms of compute per
-/// macro-step, 15.8 ms of wall; the pure DEM's 2.1 ms per step on two threads). `grains
-/// bench hybrid` prints these costs fitted anew under its table.
+/// Measured on a 2-core machine of this project's kind by `grains bench chute --radii 0.5
+/// --cells 0.004 --depths 0.0167,0.05 --depth 0.15` (the periodic chute 0.2 × 0.15 m from a
+/// poured packing of 31,872 grains; the pure DEM on two threads, 20 DEM steps per macro-step;
+/// two hybrids on 4-mm cells with 1,750 and 2,580 grains and about 7,200 points, k = 22): the
+/// costs fitted to those runs, which the model then reproduces within 3%. The pure DEM's cost
+/// per grain-step on a settled packing is 4 times what a loose lattice gives (the figure
+/// before, 2.1e-8, came from one); the column of `grains bench hybrid` gives 9.8e-8.
 pub const MEASURED: Costs = Costs {
-    dem_hybrid: 3.6e-8,
-    dem_alone: 2.1e-8,
-    mpm: 3.5e-7,
-    step: 0.8e-3,
+    dem_hybrid: 1.41e-7,
+    dem_alone: 8.8e-8,
+    mpm: 6.0e-7,
+    step: 4.7e-4,
 };
 
 /// The sizes a prediction needs.
@@ -60,6 +62,40 @@ pub fn predict(c: &Costs, n: &Counts) -> (f64, f64) {
     let per_step = (c.dem_hybrid * k * n.hybrid_grains as f64).max(c.mpm * n.points as f64) + c.step;
     let dem = c.dem_alone * k * n.all_grains as f64;
     (per_step * n.steps as f64, dem * n.steps as f64)
+}
+
+/// What one measured run says about its costs (from its `metrics.csv`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Mean DEM grains and MPM points over the run.
+    pub grains: f64,
+    pub points: f64,
+    /// DEM steps per macro-step, and macro-steps.
+    pub substeps: u32,
+    pub steps: u64,
+    /// Wall time of the run [s].
+    pub wall: f64,
+    /// Mean compute time of the DEM and of the MPM per macro-step [s].
+    pub dem_step: f64,
+    pub mpm_step: f64,
+}
+
+/// The model's costs from runs: the DEM's per grain-step alone (`dem`, a pure DEM run) and in
+/// the hybrid runs, the MPM's per point-step, and what a macro-step adds beyond the slower
+/// solver (means over the hybrid runs). `None` without a hybrid run.
+pub fn fit(dem: &Sample, hybrid: &[Sample]) -> Option<Costs> {
+    let hybrid: Vec<&Sample> = hybrid.iter().filter(|r| r.points > 0.0).collect();
+    if hybrid.is_empty() {
+        return None;
+    }
+    let n = hybrid.len() as f64;
+    let mean = |f: &dyn Fn(&Sample) -> f64| hybrid.iter().map(|r| f(r)).sum::<f64>() / n;
+    Some(Costs {
+        dem_alone: dem.dem_step / (dem.substeps as f64 * dem.grains),
+        dem_hybrid: mean(&|r| r.dem_step / (r.substeps as f64 * r.grains)),
+        mpm: mean(&|r| r.mpm_step / r.points),
+        step: mean(&|r| (r.wall / r.steps as f64 - r.dem_step.max(r.mpm_step)).max(0.0)),
+    })
 }
 
 /// The counts of a 2D hybrid scene (resolved steps), from the solvers' own set-up: the grains

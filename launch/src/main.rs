@@ -39,6 +39,9 @@ fn main() -> ExitCode {
             what: BenchCmd::Hybrid(args),
         } => bench::hybrid::bench(&args).map(|()| 0),
         Cmd::Bench { what: BenchCmd::Mpm(args) } => bench::mpm::mpm(&args).map(|()| 0),
+        Cmd::Bench {
+            what: BenchCmd::Chute(args),
+        } => bench::chute::bench(&args).map(|()| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code),

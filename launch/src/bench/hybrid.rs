@@ -13,9 +13,8 @@
 //! continuum where the inertial number is under 1e-3). Every run writes one frame at the end; the
 //! front is validate's (1-mm bins, the first whose three-bin mean height is under 3.5 mm).
 
-use crate::run::{RunOptions, Status, TransportKind, run};
 use crate::validate::deposit::{BIN, FRONT_HEIGHT, deposit, front, profile};
-use anyhow::{Context, bail};
+use anyhow::Context;
 use grains_protocol::Role;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -109,31 +108,8 @@ fn common(args: &HybridArgs, packing: &Path) -> Vec<String> {
 }
 
 fn one(args: &HybridArgs, scene: &str, label: String, overrides: Vec<String>) -> anyhow::Result<Row> {
-    // The scene as it will run (steps chosen), in a file of its own, with one frame at the
-    // start and one at the end.
-    let (s, text, _) = crate::run::steps::load(&args.scenes.join(scene), &overrides)?;
-    let resolved = std::path::absolute(
-        args.out
-            .join("scenes")
-            .join(format!("{}.toml", label.replace([' ', ',', '/'], "_"))),
-    )?;
-    std::fs::create_dir_all(resolved.parent().expect("a file in a directory"))?;
-    std::fs::write(&resolved, &text)?;
-    tracing::info!("bench hybrid: {label}");
-    let outcome = run(&RunOptions {
-        bridge: None,
-        scene_path: resolved,
-        transport: TransportKind::Ipc,
-        external: Vec::new(),
-        out_root: args.out.join("runs"),
-        progress: false,
-        overrides: vec![format!("output.frames_every={}", s.steps)],
-        announce: false,
-    })?;
-    if outcome.status != Status::Completed {
-        bail!("{label}: the run did not complete: {}", outcome.message);
-    }
-    let dir = &outcome.dir;
+    let (dir, run_scene) = super::run_resolved(&args.scenes.join(scene), &label, &overrides, &args.out, true)?;
+    let dir = &dir;
     let t = crate::metrics::MetricsTable::read(dir)?;
     let first = |role| -> anyhow::Result<u64> { Ok(t.participant(role, "items")?.and_then(|v| v.first().copied()).unwrap_or(0.0) as u64) };
     let mean = |role, what| -> anyhow::Result<f64> {
@@ -144,7 +120,6 @@ fn one(args: &HybridArgs, scene: &str, label: String, overrides: Vec<String>) ->
             v.iter().sum::<f64>() / v.len() as f64
         })
     };
-    let run_scene = grains_protocol::scene::load(&dir.join("scene.toml"))?;
     let half = 0.5 * run_scene.domain.cell_size / run_scene.mpm.points_per_axis as f64;
     let n_bins = (run_scene.domain.max[0] / BIN) as usize;
     let front = front(&profile(&deposit(dir, half)?, BIN, n_bins), BIN, FRONT_HEIGHT);
@@ -273,27 +248,19 @@ fn table(args: &HybridArgs, rows: &[Row]) -> String {
     md
 }
 
-/// The model's costs from the runs: the DEM's per grain-step alone (first row) and in the
-/// hybrid runs, the MPM's per point-step, and what a macro-step adds beyond the slower solver
-/// (means over the hybrid rows).
-fn fit(rows: &[Row]) -> Option<crate::cost::Costs> {
-    let dem = rows.first()?;
-    let hybrid: Vec<&Row> = rows.iter().skip(1).filter(|r| r.mean_points > 0.0).collect();
-    if hybrid.is_empty() {
-        return None;
+fn sample(r: &Row) -> crate::cost::Sample {
+    crate::cost::Sample {
+        grains: r.mean_grains,
+        points: r.mean_points,
+        substeps: r.substeps,
+        steps: r.steps,
+        wall: r.wall,
+        dem_step: r.dem_step,
+        mpm_step: r.mpm_step,
     }
-    let n = hybrid.len() as f64;
-    let dem_hybrid = hybrid.iter().map(|r| r.dem_step / (r.substeps as f64 * r.mean_grains)).sum::<f64>() / n;
-    let mpm = hybrid.iter().map(|r| r.mpm_step / r.mean_points).sum::<f64>() / n;
-    let step = hybrid
-        .iter()
-        .map(|r| (r.wall / r.steps as f64 - r.dem_step.max(r.mpm_step)).max(0.0))
-        .sum::<f64>()
-        / n;
-    Some(crate::cost::Costs {
-        dem_alone: dem.dem_step / (dem.substeps as f64 * dem.mean_grains),
-        dem_hybrid,
-        mpm,
-        step,
-    })
+}
+
+fn fit(rows: &[Row]) -> Option<crate::cost::Costs> {
+    let hybrid: Vec<_> = rows.iter().skip(1).map(sample).collect();
+    crate::cost::fit(&sample(rows.first()?), &hybrid)
 }

@@ -2,11 +2,48 @@
 //! (two codes, two transports, two models) so that a shared machine's noise cancels in the
 //! ratio: [`ipc`] (transport cost per macro-step, iceoryx2 processes against threads),
 //! [`dem`] (µs per grain-step beside LAMMPS), [`mpm`] (µs per point-step beside Taichi),
-//! [`hybrid`] (the hybrid column against the pure DEM one). [`machine`] measures the
-//! machine itself.
+//! [`hybrid`] (the hybrid column against the pure DEM one), [`chute`] (Yue 2018 §5's speed-up
+//! study on the periodic chute). [`machine`] measures the machine itself.
 
+pub mod chute;
 pub mod dem;
 pub mod hybrid;
 pub mod ipc;
 pub mod machine;
 pub mod mpm;
+
+/// Runs `scene` with `overrides` as a bench run: the scene as it will run (steps chosen) in a
+/// file of its own under `out/scenes` named after `label`, its output under `out/runs`, one
+/// frame at the end when `frame` is set. Returns the run's directory and its scene.
+pub(crate) fn run_resolved(
+    scene: &std::path::Path,
+    label: &str,
+    overrides: &[String],
+    out: &std::path::Path,
+    frame: bool,
+) -> anyhow::Result<(std::path::PathBuf, grains_protocol::scene::Scene)> {
+    use crate::run::{RunOptions, Status, TransportKind, run};
+    let (s, text, _) = crate::run::steps::load(scene, overrides)?;
+    let resolved = std::path::absolute(
+        out.join("scenes")
+            .join(format!("{}.toml", label.replace([' ', ',', '/', '='], "_"))),
+    )?;
+    std::fs::create_dir_all(resolved.parent().expect("a file in a directory"))?;
+    std::fs::write(&resolved, &text)?;
+    tracing::info!("bench: {label}");
+    let outcome = run(&RunOptions {
+        bridge: None,
+        scene_path: resolved,
+        transport: TransportKind::Ipc,
+        external: Vec::new(),
+        out_root: out.join("runs"),
+        progress: false,
+        overrides: vec![format!("output.frames_every={}", if frame { s.steps } else { 0 })],
+        announce: false,
+    })?;
+    if outcome.status != Status::Completed {
+        anyhow::bail!("{label}: the run did not complete: {}", outcome.message);
+    }
+    let run_scene = grains_protocol::scene::load(&outcome.dir.join("scene.toml"))?;
+    Ok((outcome.dir, run_scene))
+}

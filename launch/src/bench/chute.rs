@@ -1,0 +1,402 @@
+//! `grains bench chute`: Yue 2018 §5's speed-up study (Fig. 18–19) on the periodic chute of
+//! `scenes/chute_hybrid_2d.toml`. The geometry stays fixed (a layer 0.2 m long and 5 cm deep);
+//! the sweep varies the grain radius (so the initial grain count N_i), the depth of the
+//! discrete layer (so the DEM fraction F left after hybridization) and the MPM cell H. Every
+//! grain size is poured once (vertical gravity, `grains pack`) and both models start from that
+//! packing: the pure DEM (the layer's body made `dem`, two threads) and the hybrid (fixed
+//! layered zones, one thread per solver, `coupling.substeps = "auto"`: both at their stable
+//! steps), every run over the same simulated window. Printed: wall time, speed-up, the
+//! measured F and the down-slope mass flux of each, the phase plots (hybrid faster or slower,
+//! per H) and the cost model of `launch/src/cost.rs` fitted to these runs, with its
+//! prediction at sizes this machine does not run.
+
+use crate::cost::{Costs, Sample, fit};
+use crate::report::chart::{Chart, Kind, Series};
+use anyhow::Context;
+use grains_protocol::Role;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct ChuteArgs {
+    /// Directory of the scenes (chute_hybrid_2d.toml).
+    #[arg(long, default_value = "scenes")]
+    pub scenes: PathBuf,
+    /// Mean grain radii [mm] (N_i: about 3,400 at 1 mm, 28,000 at 0.35 mm).
+    #[arg(long, value_delimiter = ',', default_values_t = [1.0, 0.5, 0.35])]
+    pub radii: Vec<f64>,
+    /// Depth of the layer [m] (the scene's is 5 cm).
+    #[arg(long, default_value_t = 0.05)]
+    pub depth: f64,
+    /// Depths of the discrete layer, as fractions of the layer's depth (the coupled band comes
+    /// under it).
+    #[arg(long, value_delimiter = ',', default_values_t = [0.05, 0.15, 0.3])]
+    pub depths: Vec<f64>,
+    /// MPM cell sizes H [m] (whole divisors of the 0.2 m period).
+    #[arg(long, value_delimiter = ',', default_values_t = [0.008, 0.004, 0.002])]
+    pub cells: Vec<f64>,
+    /// Thickness of the coupled band, in cells.
+    #[arg(long, default_value_t = 1.0)]
+    pub band: f64,
+    /// Simulated time of every run [s].
+    #[arg(long, default_value_t = 0.1)]
+    pub window: f64,
+    /// Where the packings, runs, table and charts go.
+    #[arg(long, default_value = "out/bench/chute")]
+    pub out: PathBuf,
+}
+
+const SCENE: &str = "chute_hybrid_2d.toml";
+/// Period of the layer [m].
+const LENGTH: f64 = 0.2;
+/// DEM steps per macro-step of the pure DEM runs.
+const DEM_SUBSTEPS: u32 = 20;
+
+/// The grains of one size: radius and spread, and the layer between the glued row and the top.
+fn grains(r: f64) -> Vec<String> {
+    let bottom = 3.0 * r;
+    vec![
+        format!("material.0.dem.radius={r:e}"),
+        format!("material.0.dem.radius_std={:e}", 0.08 * r),
+        format!("body.1.max=[{LENGTH},{:e}]", 2.6 * r),
+        format!("body.0.min=[0.0,{bottom:e}]"),
+    ]
+}
+
+/// The poured packing of grains of radius `r`, once per size (kept in `--out`).
+fn packing(args: &ChuteArgs, r: f64) -> anyhow::Result<PathBuf> {
+    let path = std::path::absolute(args.out.join(format!("packing_r{:.0}um_d{:.0}mm.data", r * 1e6, args.depth * 1e3)))?;
+    if path.exists() {
+        return Ok(path);
+    }
+    // A jittered lattice (spacing 2.37 r) settles to about 0.66 of its height.
+    let top = 3.0 * r + args.depth / 0.62;
+    let mut o = grains(r);
+    o.extend([
+        "gravity=[0.0,-9.81]".into(),
+        "body.0.model=\"dem\"".into(),
+        format!("body.0.max=[{LENGTH},{top:e}]"),
+        format!("domain.max=[{LENGTH},{:e}]", top + 0.01),
+        "coupling.substeps=10".into(),
+        "run.threads=2".into(),
+    ]);
+    let dt = dem_step(&args.scenes.join(SCENE), &o)?;
+    o.push(format!("run.dt={:e}", 10.0 * dt));
+    o.push(format!("run.duration={:.3}", (2.0 * top / 9.81).sqrt() + 0.1));
+    tracing::info!("bench chute: pouring grains of radius {} mm (grains pack, once)", r * 1e3);
+    crate::pack::pack(&crate::pack::PackArgs {
+        scene: args.scenes.join(SCENE),
+        out: path.clone(),
+        friction: None,
+        overrides: o,
+    })?;
+    Ok(path)
+}
+
+/// The DEM's stable step of the scene with these overrides [s] (a hair under it: the check
+/// is strict, and run.dt = k dt must not round above k times the limit).
+fn dem_step(scene: &Path, overrides: &[String]) -> anyhow::Result<f64> {
+    let mut o = overrides.to_vec();
+    o.extend(["body.0.model=\"dem\"".into(), "coupling.substeps=1".into(), "run.dt=1e-9".into()]);
+    let (s, _) = grains_protocol::scene::load_with_overrides(scene, &o)?;
+    let (safe, ..) = grains_dem_service::setup::stable_step(&s).context("the chute has DEM grains")?;
+    Ok(safe * (1.0 - 1e-6))
+}
+
+struct Row {
+    radius: f64,
+    /// Cell [m] (0 for the pure DEM) and discrete depth fraction asked for.
+    cell: f64,
+    depth: f64,
+    /// Grains of the run at the start, and of the pure DEM of the same size.
+    grains: u64,
+    dem_grains: u64,
+    points: u64,
+    sample: Sample,
+    /// Down-slope mass flux per unit width at the end of the window, Σ m v_x / L [kg/(m s)]
+    /// (per metre of thickness).
+    flux: f64,
+}
+
+impl Row {
+    fn fraction(&self) -> f64 {
+        self.grains as f64 / self.dem_grains as f64
+    }
+}
+
+fn one(args: &ChuteArgs, label: &str, overrides: &[String]) -> anyhow::Result<(Sample, u64, u64, f64)> {
+    let (dir, scene) = super::run_resolved(&args.scenes.join(SCENE), label, overrides, &args.out, false)?;
+    let t = crate::metrics::MetricsTable::read(&dir)?;
+    let col = |role, what| -> anyhow::Result<Vec<f64>> { Ok(t.participant(role, what)?.unwrap_or_default()) };
+    let mean = |v: Vec<f64>| {
+        if v.is_empty() {
+            0.0
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let first = |v: Vec<f64>| v.first().copied().unwrap_or(0.0) as u64;
+    let last = |v: Vec<f64>| v.last().copied().unwrap_or(0.0);
+    let flux = (last(col(Role::Dem, "px")?) + last(col(Role::Mpm, "px")?)) / LENGTH;
+    Ok((
+        Sample {
+            grains: mean(col(Role::Dem, "items")?),
+            points: mean(col(Role::Mpm, "items")?),
+            substeps: scene.coupling.substeps,
+            steps: scene.steps,
+            wall: t.last("wall_s")?,
+            dem_step: 1e-3 * mean(col(Role::Dem, "compute_ms")?),
+            mpm_step: 1e-3 * mean(col(Role::Mpm, "compute_ms")?),
+        },
+        first(col(Role::Dem, "items")?),
+        first(col(Role::Mpm, "items")?),
+        flux,
+    ))
+}
+
+pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out)?;
+    let mut rows: Vec<Row> = Vec::new();
+    for &radius_mm in &args.radii {
+        let r = radius_mm * 1e-3;
+        let packing = packing(args, r)?;
+        let mut base = grains(r);
+        base.extend([
+            format!("body.0.packing={:?}", packing.display().to_string()),
+            format!("body.0.max=[{LENGTH},{:e}]", 3.0 * r + args.depth),
+            format!("domain.max=[{LENGTH},{:e}]", args.depth + 0.03),
+            format!("run.duration={}", args.window),
+        ]);
+        let dt = dem_step(&args.scenes.join(SCENE), &base)?;
+        let mut o = base.clone();
+        // The same DEM step, 20 to a macro-step: the launcher's per-macro-step cost (summaries,
+        // metrics) stays out of the DEM's figure.
+        o.extend([
+            "body.0.model=\"dem\"".into(),
+            format!("coupling.substeps={DEM_SUBSTEPS}"),
+            format!("run.dt={:e}", DEM_SUBSTEPS as f64 * dt),
+            "run.threads=2".into(),
+        ]);
+        let (sample, grains, _, flux) = one(args, &format!("DEM r={radius_mm}mm"), &o)?;
+        let dem_grains = grains;
+        rows.push(Row {
+            radius: r,
+            cell: 0.0,
+            depth: 1.0,
+            grains,
+            dem_grains,
+            points: 0,
+            sample,
+            flux,
+        });
+        for &h in &args.cells {
+            for &f in &args.depths {
+                let mut o = base.clone();
+                o.extend([
+                    format!("domain.cell_size={h}"),
+                    format!("domain.min=[0.0,{:e}]", -3.0 * h),
+                    format!("coupling.discrete_layer={:e}", f * args.depth),
+                    format!("coupling.hybrid_band={:e}", args.band * h),
+                    format!("coupling.dem_dt={dt:e}"),
+                ]);
+                let label = format!("hybrid r={radius_mm}mm H={}mm depth={f}", h * 1e3);
+                let (sample, grains, points, flux) = one(args, &label, &o)?;
+                rows.push(Row {
+                    radius: r,
+                    cell: h,
+                    depth: f,
+                    grains,
+                    dem_grains,
+                    points,
+                    sample,
+                    flux,
+                });
+            }
+        }
+    }
+    // The costs of the finest grains' runs: the smaller ones pay fixed costs per step that
+    // the model puts in no term, and the model is for extrapolating upwards.
+    let costs = rows
+        .iter()
+        .filter(|r| r.cell == 0.0)
+        .min_by(|a, b| a.radius.total_cmp(&b.radius))
+        .and_then(|dem| {
+            let hybrid: Vec<Sample> = rows
+                .iter()
+                .filter(|r| r.cell > 0.0 && r.radius == dem.radius)
+                .map(|r| r.sample)
+                .collect();
+            fit(&dem.sample, &hybrid)
+        });
+    let md = table(args, &rows, costs.as_ref());
+    print!("{md}");
+    let path = args.out.join("chute.md");
+    std::fs::File::create(&path)
+        .and_then(|mut f| f.write_all(md.as_bytes()))
+        .with_context(|| format!("writing {}", path.display()))?;
+    for &h in &args.cells {
+        phase_chart(&rows, h).write(&args.out, &format!("chute_phase_h{:.0}mm", h * 1e3))?;
+    }
+    tracing::info!("bench chute: table and phase plots written to {}", args.out.display());
+    Ok(())
+}
+
+/// Fig. 19 for one cell size: each hybrid run at (N_i, F), marked by which model was faster,
+/// with its speed-up written beside it.
+fn phase_chart(rows: &[Row], h: f64) -> Chart {
+    let runs: Vec<(&Row, f64)> = rows
+        .iter()
+        .filter(|r| r.cell == h)
+        .map(|r| (r, dem_wall(rows, r.radius) / r.sample.wall))
+        .collect();
+    let at = |faster: bool| -> Vec<(f64, f64)> {
+        runs.iter()
+            .filter(|(_, s)| (*s > 1.0) == faster)
+            .map(|(r, _)| (r.dem_grains as f64, r.fraction()))
+            .collect()
+    };
+    Chart {
+        title: format!("Periodic chute, H = {} mm: hybrid against pure DEM (grains bench chute)", h * 1e3),
+        x_label: "N_i, grains of the pure DEM".into(),
+        y_label: "F, hybrid grains / N_i".into(),
+        log_x: true,
+        series: vec![
+            Series::new("DEM faster", Kind::Crosses, at(false)),
+            Series::new("hybrid faster", Kind::Points, at(true)),
+        ],
+        notes: runs
+            .iter()
+            .map(|(r, s)| (r.dem_grains as f64, r.fraction(), format!("{s:.1}x")))
+            .collect(),
+        ..Chart::default()
+    }
+}
+
+fn dem_wall(rows: &[Row], radius: f64) -> f64 {
+    rows.iter()
+        .find(|r| r.cell == 0.0 && r.radius == radius)
+        .map_or(f64::NAN, |r| r.sample.wall)
+}
+
+fn dem_flux(rows: &[Row], radius: f64) -> f64 {
+    rows.iter()
+        .find(|r| r.cell == 0.0 && r.radius == radius)
+        .map_or(f64::NAN, |r| r.flux)
+}
+
+fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
+    let mut md = format!(
+        "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
+         from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
+         solvers on one each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
+         hybrid's. Flux: Σ m v_x / L at the end of the window. Coupled band: {} cell(s).\n\n\
+         | run | r mm | H mm | N_i | F | MPM points | k | wall s | speed-up | DEM / MPM compute ms per macro-step | flux kg/(m s) | flux vs DEM |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        args.depth, args.window, args.band
+    );
+    for r in rows {
+        let speedup = dem_wall(rows, r.radius) / r.sample.wall;
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {:.3} | {} | {} | {:.1} | {:.2}× | {:.2} / {:.2} | {:.3} | {:+.1}% |\n",
+            if r.cell == 0.0 {
+                "DEM".into()
+            } else {
+                format!("hybrid, discrete {:.0}% of the depth", 100.0 * r.depth)
+            },
+            r.radius * 1e3,
+            if r.cell == 0.0 { "-".into() } else { format!("{}", r.cell * 1e3) },
+            r.dem_grains,
+            r.fraction(),
+            r.points,
+            r.sample.substeps,
+            r.sample.wall,
+            speedup,
+            1e3 * r.sample.dem_step,
+            1e3 * r.sample.mpm_step,
+            r.flux,
+            100.0 * (r.flux / dem_flux(rows, r.radius) - 1.0)
+        ));
+    }
+    if let Some(best) = rows
+        .iter()
+        .filter(|r| r.cell > 0.0)
+        .max_by(|a, b| (dem_wall(rows, a.radius) / a.sample.wall).total_cmp(&(dem_wall(rows, b.radius) / b.sample.wall)))
+    {
+        md.push_str(&format!(
+            "\nLargest speed-up measured: {:.2}× at r = {} mm (N_i = {}), H = {} mm, F = {:.3}.\n",
+            dem_wall(rows, best.radius) / best.sample.wall,
+            best.radius * 1e3,
+            best.dem_grains,
+            best.cell * 1e3,
+            best.fraction()
+        ));
+    }
+    if let Some(c) = costs {
+        md.push_str(&format!(
+            "\nCost model (`launch/src/cost.rs`, eqs. 21–23 in grains' terms) fitted to the runs of the finest grains: pure DEM {:.3e} s \
+             per grain-step (2 threads), the hybrid's DEM {:.3e} s per grain-step and its MPM {:.3e} s per point-step (1 thread \
+             each), {:.3e} s per macro-step beside them.\n\n| run | wall s | model s |\n|---|---:|---:|\n",
+            c.dem_alone, c.dem_hybrid, c.mpm, c.step
+        ));
+        for r in rows {
+            let n = crate::cost::Counts {
+                hybrid_grains: r.sample.grains as usize,
+                points: r.sample.points as usize,
+                all_grains: r.dem_grains as usize,
+                substeps: r.sample.substeps,
+                steps: r.sample.steps,
+            };
+            let (h, d) = crate::cost::predict(c, &n);
+            md.push_str(&format!(
+                "| {} r={} mm H={} mm F={:.3} | {:.1} | {:.1} |\n",
+                if r.cell == 0.0 { "DEM" } else { "hybrid" },
+                r.radius * 1e3,
+                r.cell * 1e3,
+                r.fraction(),
+                r.sample.wall,
+                if r.cell == 0.0 { d } else { h }
+            ));
+        }
+        md.push_str(&extrapolate(c, rows, args.depth));
+    }
+    md
+}
+
+/// The fitted model at sizes beyond the sweep: the same grains, cells and discrete depth in
+/// a layer s times deeper (Yue 2018's A: the pure DEM's grains grow as s, the hybrid's grains
+/// stay, its points grow with the continuum's depth), from the runs of the finest grains.
+fn extrapolate(c: &Costs, rows: &[Row], depth: f64) -> String {
+    let Some(reference) = rows.iter().filter(|r| r.cell > 0.0).min_by(|a, b| a.radius.total_cmp(&b.radius)) else {
+        return String::new();
+    };
+    let r0 = reference.radius;
+    let scales = [1.0, 2.0, 5.0, 10.0, 20.0];
+    let mut md = format!(
+        "\nThe model beyond this machine's runs: predicted speed-up of the same chute (r = {} mm) in a layer s times deeper \
+         ({} m × s; the pure DEM's grains × s, the hybrid's grains the same, its points × (s − F) / (1 − F), k the same)\n\n\
+         | H mm | F at s = 1 | {} |\n|---:|---:|{}\n",
+        r0 * 1e3,
+        depth,
+        scales.map(|s| format!("s = {s}")).join(" | "),
+        "---:|".repeat(scales.len())
+    );
+    for r in rows.iter().filter(|r| r.cell > 0.0 && r.radius == r0) {
+        let f = r.fraction();
+        let cells: Vec<String> = scales
+            .iter()
+            .map(|&s| {
+                let n = crate::cost::Counts {
+                    hybrid_grains: r.sample.grains as usize,
+                    points: (r.sample.points * (s - f) / (1.0 - f)) as usize,
+                    all_grains: (r.dem_grains as f64 * s) as usize,
+                    substeps: r.sample.substeps,
+                    steps: 1,
+                };
+                let (h, d) = crate::cost::predict(c, &n);
+                format!("{:.1}×", d / h)
+            })
+            .collect();
+        md.push_str(&format!("| {} | {:.3} | {} |\n", r.cell * 1e3, f, cells.join(" | ")));
+    }
+    md
+}
