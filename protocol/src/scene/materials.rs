@@ -79,6 +79,19 @@ pub struct MpmMaterial {
     pub packing: f64,
     /// Where `friction_angle` and `young` come from (`grains calibrate --write` writes it).
     pub calibration: Option<String>,
+    /// `drucker_prager` only: a friction that grows with the inertial number, sin φ(I) =
+    /// sin φ + (sin φ₂ − sin φ) / (1 + I₀ / I) (the μ(I) law of GDR MiDi 2004 on the plane
+    /// Mohr–Coulomb ratio); `None`: rate-independent.
+    pub rate: Option<RateFriction>,
+}
+
+/// The rate dependence of `drucker_prager`'s friction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateFriction {
+    /// φ₂ [degrees]: the friction angle at large inertial numbers, > `friction_angle`.
+    pub friction_angle_2: f64,
+    /// I₀: the inertial number half way between, > 0.
+    pub i0: f64,
 }
 
 pub(super) fn validate(ctx: &Ctx, raw: &[RawMaterial]) -> Result<Vec<Material>, SceneError> {
@@ -153,7 +166,40 @@ fn mpm(ctx: &Ctx, c: &RawMpmMaterial, f: &dyn Fn(&str) -> String) -> Result<MpmM
         cohesion: non_negative(ctx, &c.cohesion, &f("cohesion"))?,
         packing: in_range(ctx, &c.packing, &f("packing"), Open(0.0), Closed(1.0))?,
         calibration: c.calibration.as_ref().map(|s| s.get_ref().clone()),
+        rate: rate_friction(ctx, c, f)?,
     })
+}
+
+/// `friction_angle_2` and `inertial_i0`: both or neither, `drucker_prager` only.
+fn rate_friction(ctx: &Ctx, c: &RawMpmMaterial, f: &dyn Fn(&str) -> String) -> Result<Option<RateFriction>, SceneError> {
+    let (phi2, i0) = match (&c.friction_angle_2, &c.inertial_i0) {
+        (None, None) => return Ok(None),
+        (Some(a), Some(b)) => (a, b),
+        (Some(a), None) => {
+            return Err(ctx.err(
+                Some(a.span()),
+                Some(&f("inertial_i0")),
+                "missing: `friction_angle_2` needs `inertial_i0` (I₀ > 0)".into(),
+            ));
+        }
+        (None, Some(b)) => {
+            return Err(ctx.err(
+                Some(b.span()),
+                Some(&f("friction_angle_2")),
+                "missing: `inertial_i0` needs `friction_angle_2` (degrees, above `friction_angle`)".into(),
+            ));
+        }
+    };
+    if c.model.as_ref().is_some_and(|m| m.get_ref() != "drucker_prager") {
+        return Err(ctx.err(
+            Some(phi2.span()),
+            Some(&f("friction_angle_2")),
+            "a rate-dependent friction belongs to model = \"drucker_prager\"".into(),
+        ));
+    }
+    let friction_angle_2 = in_range(ctx, phi2, &f("friction_angle_2"), Open(*c.friction_angle.get_ref()), Open(90.0))?;
+    let i0 = positive(ctx, i0, &f("inertial_i0"))?;
+    Ok(Some(RateFriction { friction_angle_2, i0 }))
 }
 
 /// `model` of `[material.mpm]` and the parameters that belong to it alone.

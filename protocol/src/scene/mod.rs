@@ -34,7 +34,7 @@ pub use bridge::SceneBridge;
 pub use coupling::{AutoSteps, Coupling, GrainTransfer};
 pub use domain::Domain;
 pub use errors::SceneError;
-pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel};
+pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel, RateFriction};
 pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
 pub use oracle::{Oracle, OracleKind};
 pub use output::Output;
@@ -516,6 +516,32 @@ mod tests {
             "run.dt=5e-6".into(),
         ];
         load_with_overrides(&path, &dem).unwrap();
+    }
+
+    /// `friction_angle_2` and `inertial_i0` come together, above `friction_angle`, with
+    /// `drucker_prager`; errors name the missing or wrong field.
+    #[test]
+    fn a_rate_dependent_friction_needs_both_fields_above_the_static_angle() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/chute_hybrid_2d.toml");
+        let set = |o: &[&str]| load_with_overrides(&path, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>());
+        let (s, _) = set(&["material.0.mpm.friction_angle_2=30.0", "material.0.mpm.inertial_i0=0.3"]).unwrap();
+        let rate = s.materials[0].mpm.as_ref().unwrap().rate.unwrap();
+        assert_eq!((rate.friction_angle_2, rate.i0), (30.0, 0.3));
+        let e = set(&["material.0.mpm.friction_angle_2=30.0"]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("material.0.mpm.inertial_i0"), "{e}");
+        let e = set(&["material.0.mpm.inertial_i0=0.3"]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("material.0.mpm.friction_angle_2"), "{e}");
+        let e = set(&["material.0.mpm.friction_angle_2=10.0", "material.0.mpm.inertial_i0=0.3"]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("material.0.mpm.friction_angle_2"), "{e}");
+        assert!(set(&["material.0.mpm.friction_angle_2=30.0", "material.0.mpm.inertial_i0=0.0"]).is_err());
+        assert!(
+            load_with_overrides(&path, &[]).unwrap().0.materials[0]
+                .mpm
+                .as_ref()
+                .unwrap()
+                .rate
+                .is_none()
+        );
     }
 
     #[test]

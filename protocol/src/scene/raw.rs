@@ -80,6 +80,8 @@ pub struct RawMpmMaterial {
     pub packing_critical: Option<Spanned<f64>>,
     pub chi: Option<Spanned<f64>>,
     pub xi: Option<Spanned<f64>>,
+    pub friction_angle_2: Option<Spanned<f64>>,
+    pub inertial_i0: Option<Spanned<f64>>,
     pub calibration: Option<Spanned<String>>,
 }
 

@@ -647,9 +647,7 @@ fn constitutive<S: MpmSpace>(pts: &mut Points<S>, model: &Model, dt: f64) -> Res
                 match model {
                     Model::Elastic(m) => ts[k] = yue::kirchhoff(m, &trial),
                     Model::Yue(m) => {
-                        let b = yue::return_map(m, &trial);
-                        // ‖Δε^p‖ with ε = ½ ln b ≈ ½ (b − I) for the small elastic strains of sand.
-                        let de = 0.5 * (trial - b).norm();
+                        let (b, de) = m.return_map_rate(&trial, dt);
                         eps[k] += de;
                         rate[k] = de / dt;
                         bs[k] = b;

@@ -4,7 +4,7 @@
 use grains_grid::{Grid, Space};
 use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
-use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
+use grains_mpm::constitutive::plasticity_drucker_prager::{DruckerPragerYue, InertialFriction};
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
@@ -31,7 +31,19 @@ fn mpm_material(scene: &Scene) -> Result<(usize, &Material), String> {
 pub fn model(material: &Material, dim: usize) -> Model {
     let m = material.mpm.as_ref().expect("validated: mpm bodies have [material.mpm]");
     match m.model {
-        MpmModel::DruckerPrager => Model::Yue(DruckerPragerYue::new(m.young, m.poisson, m.friction_angle, dim)),
+        MpmModel::DruckerPrager => {
+            let mut dp = DruckerPragerYue::new(m.young, m.poisson, m.friction_angle, dim);
+            dp.rate = m.rate.map(|r| InertialFriction {
+                sin_static: m.friction_angle.to_radians().sin(),
+                sin_dynamic: r.friction_angle_2.to_radians().sin(),
+                i0: r.i0,
+                // Checked by `check`: a rate-dependent continuum has grains to take d from.
+                diameter: 2.0 * material.dem.as_ref().map_or(0.0, |d| d.radius),
+                grain_density: material.density,
+                dim,
+            });
+            Model::Yue(dp)
+        }
         MpmModel::CriticalState { packing_critical, chi, xi } => {
             let elastic = DruckerPragerYue::new(m.young, m.poisson, 0.0, dim);
             Model::CriticalState(HenckyCriticalState {
@@ -87,6 +99,13 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
                 ));
             }
         }
+    }
+    if material.mpm.as_ref().is_some_and(|m| m.rate.is_some()) && material.dem.is_none() {
+        let k = scene.materials.iter().position(|m| std::ptr::eq(m, material)).unwrap_or(0);
+        return Err((
+            format!("material.{k}.mpm.friction_angle_2"),
+            "a rate-dependent friction needs the grain diameter of the inertial number: give the material a [material.dem] radius".into(),
+        ));
     }
     let rho = bulk_density(material);
     let model = model(material, dim);

@@ -22,6 +22,53 @@ pub struct DruckerPragerYue {
     pub shear: f64,
     /// Yield slope α (sets the angle of repose).
     pub alpha: f64,
+    /// A friction that grows with the inertial number (`None`: α fixed).
+    pub rate: Option<InertialFriction>,
+}
+
+/// The μ(I) law (GDR MiDi 2004, Jop et al. 2006) on the plane Mohr–Coulomb ratio that α sets:
+/// sin φ(I) = sin φ_s + (sin φ₂ − sin φ_s) / (1 + I₀ / I), with the inertial number as `grains
+/// calibrate --inertial` defines it, I = ε̇ d √(ρ_s / p): ε̇ the axial strain rate of a plane
+/// isochoric compression, ‖ε̇^p‖ / √2 for a point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InertialFriction {
+    pub sin_static: f64,
+    pub sin_dynamic: f64,
+    pub i0: f64,
+    /// Grain diameter d [m] and the grains' own density ρ_s [kg/m³].
+    pub diameter: f64,
+    pub grain_density: f64,
+    pub dim: usize,
+}
+
+impl InertialFriction {
+    /// The inertial number of a point flowing at plastic strain rate ‖ε̇^p‖ under pressure p
+    /// (infinite at p ≤ 0: a point in extension flows freely anyway).
+    pub fn inertial_number(&self, plastic_rate: f64, pressure: f64) -> f64 {
+        if pressure <= 0.0 {
+            return f64::INFINITY;
+        }
+        plastic_rate * std::f64::consts::FRAC_1_SQRT_2 * self.diameter * (self.grain_density / pressure).sqrt()
+    }
+
+    /// α at inertial number I.
+    pub fn alpha(&self, i: f64) -> f64 {
+        let s = if i > 0.0 {
+            self.sin_static + (self.sin_dynamic - self.sin_static) / (1.0 + self.i0 / i)
+        } else {
+            self.sin_static
+        };
+        alpha_of_sin(s, self.dim)
+    }
+}
+
+/// α of a friction angle's sine: √2 sin φ in 2D, 2√6 sin φ / (3 − sin φ) in 3D.
+fn alpha_of_sin(s: f64, dim: usize) -> f64 {
+    if dim == 2 {
+        std::f64::consts::SQRT_2 * s
+    } else {
+        2.0 * 6f64.sqrt() * s / (3.0 - s)
+    }
 }
 
 impl DruckerPragerYue {
@@ -31,13 +78,51 @@ impl DruckerPragerYue {
     pub fn new(young: f64, poisson: f64, friction_angle_deg: f64, dim: usize) -> Self {
         let bulk = young / (dim as f64 * (1.0 - (dim as f64 - 1.0) * poisson));
         let shear = young / (2.0 * (1.0 + poisson));
-        let s = friction_angle_deg.to_radians().sin();
-        let alpha = if dim == 2 {
-            std::f64::consts::SQRT_2 * s
-        } else {
-            2.0 * 6f64.sqrt() * s / (3.0 - s)
+        let alpha = alpha_of_sin(friction_angle_deg.to_radians().sin(), dim);
+        DruckerPragerYue {
+            bulk,
+            shear,
+            alpha,
+            rate: None,
+        }
+    }
+
+    /// The return mapping of a trial strain over a step dt and the plastic strain increment
+    /// ‖Δε^p‖ it implies (ε = ½ ln b ≈ ½ (b − I) for the small elastic strains of sand).
+    /// With a rate dependence α and the rate are found together (bisection on α between the
+    /// static and the dynamic slope: the plastic increment falls as α grows, α(I) grows with
+    /// it): taking the rate of the last step instead flips between an elastic and a doubled
+    /// plastic step every step.
+    pub fn return_map_rate<M: Matrix>(&self, trial: &M, dt: f64) -> (M, f64) {
+        let plastic = |m: &DruckerPragerYue| {
+            let b = return_map(m, trial);
+            (b, 0.5 * (*trial - b).norm())
         };
-        DruckerPragerYue { bulk, shear, alpha }
+        let (b, de) = plastic(self);
+        let Some(r) = &self.rate else {
+            return (b, de);
+        };
+        if de == 0.0 {
+            return (b, de);
+        }
+        // The return keeps det b: the pressure is the trial's.
+        let p = pressure(self, trial);
+        let (mut lo, mut hi) = (self.alpha, r.alpha(f64::INFINITY));
+        let mut best = (b, de);
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            let (b, de) = plastic(&DruckerPragerYue { alpha: mid, ..*self });
+            best = (b, de);
+            if mid < r.alpha(r.inertial_number(de / dt, p)) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo < 1e-9 * hi {
+                break;
+            }
+        }
+        best
     }
 }
 
@@ -145,6 +230,60 @@ mod tests {
         let t = k as f64 * 0.37;
         let (a, b, c) = (0.95 - 0.01 * (k % 3) as f64, 0.99 + 0.002 * (k % 5) as f64, 0.04 + 0.01 * t.sin());
         DMat2::from_cols(DVec2::new(a, c), DVec2::new(c, b))
+    }
+
+    /// Steady simple shear at rate γ̇ under pressure p, stepped as the pipeline steps a point
+    /// (b* = F b Fᵀ, the return mapping at the last step's plastic rate): the stress ratio
+    /// τ_xy / p settles on the μ(I) law at the inertial number of calibrate's definition,
+    /// I = (γ̇ / 2) d √(ρ_s / p) (the axial rate of the equivalent plane compression is half
+    /// the shear rate), for shear rates across I₀. Rate-independent it stays at sin φ.
+    #[test]
+    fn steady_simple_shear_follows_the_mu_of_i_law() {
+        let (young, phi_s, phi_2, i0, d, rho_s) = (1e6, 15.0f64, 35.0f64, 0.05, 1e-3, 2500.0);
+        let mut m = DruckerPragerYue::new(young, 0.3, phi_s, 2);
+        let (sin_s, sin_2) = (phi_s.to_radians().sin(), phi_2.to_radians().sin());
+        m.rate = Some(InertialFriction {
+            sin_static: sin_s,
+            sin_dynamic: sin_2,
+            i0,
+            diameter: d,
+            grain_density: rho_s,
+            dim: 2,
+        });
+        let p0 = 1000.0;
+        for gamma_dot in [2.0, 20.0, 200.0] {
+            let dt = 1e-6;
+            let f = DMat2::IDENTITY + DMat2::from_cols(DVec2::ZERO, DVec2::new(gamma_dot * dt, 0.0));
+            // Isotropic compression at p0: det b = 1 − 2 p0 / κ.
+            let mut b = DMat2::IDENTITY * (1.0 - 2.0 * p0 / m.bulk).sqrt();
+            let mut rate = 0.0;
+            // Shear strain 0.5: well past yield, the rate settled.
+            for _ in 0..(0.5 / (gamma_dot * dt)) as usize {
+                let trial = f * b * f.transpose();
+                let (next, de) = m.return_map_rate(&trial, dt);
+                rate = de / dt;
+                b = next;
+            }
+            let tau = kirchhoff(&m, &b);
+            let p = pressure(&m, &b);
+            let ratio = tau.col(1).x / p;
+            let i = 0.5 * gamma_dot * d * (rho_s / p).sqrt();
+            let expected = sin_s + (sin_2 - sin_s) / (1.0 + i0 / i);
+            // Steady: all of the shear is plastic, ‖ε̇^p‖ = γ̇ / √2.
+            assert!(
+                (rate - gamma_dot * std::f64::consts::FRAC_1_SQRT_2).abs() < 0.01 * gamma_dot,
+                "{rate}"
+            );
+            assert!(
+                (ratio - expected).abs() < 0.01 * expected,
+                "γ̇ = {gamma_dot}: I = {i:.4}, τ/p = {ratio:.4}, μ(I) = {expected:.4}"
+            );
+            // And the law is not the constant.
+            assert!(
+                i < 0.2 * i0 || (ratio - sin_s) > 0.1 * (sin_2 - sin_s),
+                "γ̇ = {gamma_dot}: I = {i}, τ/p = {ratio}"
+            );
+        }
     }
 
     fn strained3(k: usize) -> DMat3 {
