@@ -57,6 +57,11 @@ fn pack_in<S: Space>(scene: &Scene, args: &PackArgs) -> anyhow::Result<()> {
         scene.steps * per_step as u64
     );
     for step in 1..=scene.steps {
+        // Inside `grains bench` an earlier run has installed the launcher's Ctrl-C/SIGTERM
+        // handler, which only raises a flag: without this a pour would not stop.
+        if grains_service::signals::signalled() {
+            bail!("interrupted at macro-step {step} of {}: no packing written", scene.steps);
+        }
         pipeline.run(&mut state, dt, per_step);
         if let Some(id) = DemPipeline::first_non_finite(&state) {
             bail!("grain {id} is not finite at macro-step {step}: the settling blew up");
