@@ -249,16 +249,7 @@ impl<S: Space> DemPipeline<S> {
         let (period, half) = periods(state);
         let any_periodic = d.periodic.iter().any(|&p| p);
         // Box bounds for the wrap; open axes never wrap (bounds ±∞, period 0).
-        let bound = |v: &[f64; 3], open: f64| {
-            let mut a = [open; 3];
-            for k in 0..S::DIM {
-                if d.periodic[k] {
-                    a[k] = v[k];
-                }
-            }
-            S::from_array(a)
-        };
-        let (lo, hi) = (bound(&d.min, f64::NEG_INFINITY), bound(&d.max, f64::INFINITY));
+        let (lo, hi, _) = d.wrap_box::<S>();
         let g = &mut state.grains;
         let built = self.neighbors.positions_at_build();
         let check = built.len() == g.len();

@@ -170,11 +170,7 @@ impl Domain {
     /// The bounds and periods for [`Vector::wrap`]: the box on periodic axes; ±∞ and a
     /// period of 0 on open ones, which never wrap.
     pub fn wrap_box<S: Space>(&self) -> (S::V, S::V, S::V) {
-        let (mut lo, mut hi, mut p) = ([f64::NEG_INFINITY; 3], [f64::INFINITY; 3], [0.0; 3]);
-        for k in (0..S::DIM).filter(|&k| self.periodic[k]) {
-            (lo[k], hi[k], p[k]) = (self.min[k], self.max[k], self.length(k));
-        }
-        (S::from_array(lo), S::from_array(hi), S::from_array(p))
+        grains_grid::space::wrap_box::<S>(self.min, self.max, self.periodic)
     }
 }
 

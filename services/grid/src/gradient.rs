@@ -28,3 +28,11 @@ impl Gradient {
         (2.0 * dd).sqrt()
     }
 }
+
+/// The inertial number I = rate · d √(ρ_s / p) (GDR MiDi 2004) of material shearing at
+/// `rate` [1/s] (the caller's measure of it: the oracle's shear rate, the MPM's plastic
+/// rate as calibrate counts it) with grains of diameter d and density ρ_s under pressure p;
+/// `None` where p ≤ 0 (no contact network: each caller says what that means for it).
+pub fn inertial_number(rate: f64, diameter: f64, grain_density: f64, pressure: f64) -> Option<f64> {
+    (pressure > 0.0).then(|| rate * diameter * (grain_density / pressure).sqrt())
+}

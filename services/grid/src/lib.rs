@@ -6,7 +6,7 @@
 //!   as Yue 2018 §3.4 uses it, particle width = cell width / points per cell) and quadratic
 //!   B-splines — through which the MPM transfers, and the DEM and the coupler rasterize;
 //! - [`gradient`]: a velocity field's gradient, its spin and its shear rate (the DEM's band
-//!   grains, the oracle's inertial number);
+//!   grains, the oracle), and the inertial number of a rate (the oracle, the MPM's μ(I));
 //! - [`homogenize`]: the grains' stress on the grid from their contacts (Yue 2018 Alg. 11),
 //!   computed by the DEM for the oracle's new material points;
 //! - [`rng`]: seeded SplitMix64 randomness and the polydisperse radius draw, for the DEM's

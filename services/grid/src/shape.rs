@@ -55,10 +55,13 @@ impl Grid {
     /// Node (i, j, k) with its periodic components brought into [0, period).
     #[inline(always)]
     pub fn wrap(&self, ijk: [i64; 3]) -> [i64; 3] {
-        [0, 1, 2].map(|k| match self.period[k] {
-            0 => ijk[k],
-            p => ijk[k].rem_euclid(p as i64),
-        })
+        [0, 1, 2].map(|k| wrap_index(ijk[k], self.period[k] as i64))
+    }
+
+    /// The periodic box of the grid for [`crate::Vector::wrap`] (see [`crate::space::wrap_box`]).
+    pub fn wrap_box<S: crate::Space>(&self) -> (S::V, S::V, S::V) {
+        let max = [0, 1, 2].map(|k| self.origin[k] + self.h * self.period[k] as f64);
+        crate::space::wrap_box::<S>(self.origin, max, self.period.map(|p| p > 0))
     }
 
     /// Linear index of node (i, j, k) (wrapped on periodic axes), or `None` outside the grid.
@@ -87,6 +90,13 @@ impl Grid {
     pub fn position(&self, ijk: [i64; 3]) -> [f64; 3] {
         [0, 1, 2].map(|k| self.origin[k] + self.h * ijk[k] as f64)
     }
+}
+
+/// Node index `i` along an axis of `period` nodes, brought into [0, period) (unchanged on an
+/// open axis, period 0).
+#[inline(always)]
+pub fn wrap_index(i: i64, period: i64) -> i64 {
+    if period > 0 { i.rem_euclid(period) } else { i }
 }
 
 /// One axis of a stencil: the first node and three weights with their derivatives d/dx [1/m].

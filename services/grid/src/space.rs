@@ -6,6 +6,16 @@ use glam::{DQuat, DVec2, DVec3};
 use std::fmt::Debug;
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
+/// The bounds and periods of a box for [`Vector::wrap`]: [min, max) on the `periodic` axes;
+/// ±∞ and a period of 0 on the others, which never wrap.
+pub fn wrap_box<S: Space>(min: [f64; 3], max: [f64; 3], periodic: [bool; 3]) -> (S::V, S::V, S::V) {
+    let (mut lo, mut hi, mut p) = ([f64::NEG_INFINITY; 3], [f64::INFINITY; 3], [0.0; 3]);
+    for k in (0..S::DIM).filter(|&k| periodic[k]) {
+        (lo[k], hi[k], p[k]) = (min[k], max[k], max[k] - min[k]);
+    }
+    (S::from_array(lo), S::from_array(hi), S::from_array(p))
+}
+
 /// Vector operations the kernels need, on `DVec2` and `DVec3`.
 pub trait Vector:
     Copy

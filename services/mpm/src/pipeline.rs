@@ -467,7 +467,7 @@ impl<S: MpmSpace> MpmPipeline<S> {
             (0..S::DIM).all(|k| grid.period[k] > 0 || (x[k] >= lo[k] && x[k] <= hi[k]))
         };
         let periodic = grid.period.iter().any(|&p| p > 0);
-        let (box_lo, box_hi, period) = periodic_box::<S>(grid);
+        let (box_lo, box_hi, period) = grid.wrap_box::<S>();
         let gimp_d = matches!(params.kernel, Kernel::Gimp { .. });
         let d_inv_bspline = 4.0 / (grid.h * grid.h);
         let zero = S::M::identity() * 0.0;
@@ -588,20 +588,6 @@ impl<S: MpmSpace> MpmPipeline<S> {
             }
         }
     }
-}
-
-/// The periodic box of a grid for [`Vector::wrap`]: its bounds and periods on periodic axes
-/// (±∞ and 0 on open ones, which never wrap).
-fn periodic_box<S: Space>(grid: &Grid) -> (S::V, S::V, S::V) {
-    let (mut lo, mut hi, mut p) = ([f64::NEG_INFINITY; 3], [f64::INFINITY; 3], [0.0; 3]);
-    for k in 0..S::DIM {
-        if grid.period[k] > 0 {
-            p[k] = grid.h * grid.period[k] as f64;
-            lo[k] = grid.origin[k];
-            hi[k] = grid.origin[k] + p[k];
-        }
-    }
-    (S::from_array(lo), S::from_array(hi), S::from_array(p))
 }
 
 #[inline]

@@ -6,6 +6,7 @@
 //! `slot · B^d + (i mod 4) + 4 (j mod 4) + 16 (k mod 4)`.
 
 use grains_grid::Grid;
+use grains_grid::shape::wrap_index;
 
 /// Nodes per block along an axis (a power of two).
 pub const BLOCK: i64 = 4;
@@ -76,7 +77,7 @@ impl BlockMap {
         if !self.periodic {
             return ijk;
         }
-        [0, 1, 2].map(|k| self.wrap_axis(k, ijk[k]))
+        [0, 1, 2].map(|k| wrap_index(ijk[k], self.period[k]))
     }
 
     /// Rebuilds the active set: `stencil_starts` yields the first node (i, j, k) of every point's
@@ -89,12 +90,7 @@ impl BlockMap {
         // Per axis the blocks of the stencil's three nodes (on a periodic axis they may be
         // three different blocks: the last, partly used block and the first).
         let period = self.period;
-        let blocks = |k: usize, s: i64| {
-            [0, 1, 2].map(|a| {
-                let i = s + a;
-                (if period[k] > 0 { i.rem_euclid(period[k]) } else { i }) >> SHIFT
-            })
-        };
+        let blocks = |k: usize, s: i64| [0, 1, 2].map(|a| wrap_index(s + a, period[k]) >> SHIFT);
         // Points come sorted by block: most stencils start in the same block as the last one.
         let mut last = [[i64::MIN; 3]; 3];
         for (p, start) in stencil_starts.enumerate() {
@@ -151,16 +147,11 @@ impl BlockMap {
     pub fn stencil_slots(&self, start: [i64; 3]) -> (usize, usize) {
         let (mut lo, mut hi) = (start, start);
         for k in 0..self.dim {
-            let n = [0, 1, 2].map(|a| self.wrap_axis(k, start[k] + a));
+            let n = [0, 1, 2].map(|a| wrap_index(start[k] + a, self.period[k]));
             lo[k] = n[0].min(n[1]).min(n[2]);
             hi[k] = n[0].max(n[1]).max(n[2]);
         }
         (self.slot(lo), self.slot(hi))
-    }
-
-    #[inline(always)]
-    fn wrap_axis(&self, k: usize, i: i64) -> i64 {
-        if self.period[k] > 0 { i.rem_euclid(self.period[k]) } else { i }
     }
 
     /// Storage index of node (i, j, k), or `None` when it is outside the grid or its block is

@@ -341,7 +341,7 @@ impl<'a> Epoch<'a> {
                 }
                 let rate = grains_grid::gradient::Gradient(l).shear_rate(dim);
                 let p = s.bulk_density * g_norm * depth[c].max(d);
-                if p > 0.0 { rate * d * (s.grain_density / p).sqrt() } else { 0.0 }
+                grains_grid::gradient::inertial_number(rate, d, s.grain_density, p).unwrap_or(0.0)
             })
             .collect()
     }

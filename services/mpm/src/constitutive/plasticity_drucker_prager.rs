@@ -45,10 +45,8 @@ impl InertialFriction {
     /// The inertial number of a point flowing at plastic strain rate ‖ε̇^p‖ under pressure p
     /// (infinite at p ≤ 0: a point in extension flows freely anyway).
     pub fn inertial_number(&self, plastic_rate: f64, pressure: f64) -> f64 {
-        if pressure <= 0.0 {
-            return f64::INFINITY;
-        }
-        plastic_rate * std::f64::consts::FRAC_1_SQRT_2 * self.diameter * (self.grain_density / pressure).sqrt()
+        let axial_rate = plastic_rate * std::f64::consts::FRAC_1_SQRT_2;
+        grains_grid::gradient::inertial_number(axial_rate, self.diameter, self.grain_density, pressure).unwrap_or(f64::INFINITY)
     }
 
     /// α at inertial number I.
