@@ -412,8 +412,9 @@ fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
 
 /// A remote client that subscribes to the views and never reads them
 /// (`tests/python/stalled_viewer.py`) does not slow the run by more than 5% (issue 7): the same
-/// run with and without such a client, alternating, fastest of three each (the machine is
-/// shared: the fastest run is the least disturbed).
+/// run with and without such a client, alternating, fastest of five each (the machine is
+/// shared: the fastest run is the least disturbed; with three, a CI machine 1.6× slower than
+/// ours once saw +5.8% where ours sees −3%).
 #[test]
 fn a_client_that_never_reads_views_does_not_slow_the_run() {
     // The clients' Python first: if it cannot be had, fail before any run starts.
@@ -460,11 +461,11 @@ fn a_client_that_never_reads_views_does_not_slow_the_run() {
         summary(&dir)["wall_time_s"].as_f64().expect("wall time")
     };
     let (mut free, mut stalled) = (f64::INFINITY, f64::INFINITY);
-    for _ in 0..3 {
+    for _ in 0..5 {
         free = free.min(wall(false));
         stalled = stalled.min(wall(true));
     }
-    eprintln!("1000 steps of 4,824 grains: {free:.3} s without a client, {stalled:.3} s with a client that never reads (fastest of 3)");
+    eprintln!("1000 steps of 4,824 grains: {free:.3} s without a client, {stalled:.3} s with a client that never reads (fastest of 5)");
     assert!(
         stalled <= 1.05 * free,
         "{stalled:.3} s vs {free:.3} s: the stalled client slowed the run by more than 5%"
