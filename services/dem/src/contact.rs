@@ -101,10 +101,17 @@ pub fn damping_factor(restitution: f64, stiffness: f64) -> f64 {
     -2.0 * ln_e * (stiffness / (std::f64::consts::PI.powi(2) + ln_e * ln_e)).sqrt()
 }
 
-/// Reduced mass of a pair [kg]; a wall (infinite mass) is `f64::INFINITY`.
+/// Reduced mass of a pair [kg]; a wall or a frozen grain (infinite mass) is `f64::INFINITY`,
+/// on either side (∞ · m / ∞ would be NaN).
 #[inline]
 pub fn reduced_mass(m_i: f64, m_j: f64) -> f64 {
-    if m_j.is_infinite() { m_i } else { m_i * m_j / (m_i + m_j) }
+    if m_j.is_infinite() {
+        m_i
+    } else if m_i.is_infinite() {
+        m_j
+    } else {
+        m_i * m_j / (m_i + m_j)
+    }
 }
 
 /// History of one contact: the tangential anchor spring and whether a cohesive bond holds.

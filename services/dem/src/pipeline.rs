@@ -270,12 +270,13 @@ impl<S: Space> DemPipeline<S> {
             .enumerate()
             .with_min_len(GRAIN_TASK)
             .map(|(i, (x, v, w, rot, f, hot, &m, &r, &s, &frozen, &ext))| {
-                if frozen {
-                    return 0.0;
+                // A frozen grain takes no force: it is driven at its own velocity (zero for a
+                // scene's fixed base; a shear cell's plate moves).
+                if !frozen {
+                    half_kick::<S>(v, w, f, ext, gravity, m * s, r, h);
+                    *rot = S::rotate(*rot, *w, dt);
                 }
-                half_kick::<S>(v, w, f, ext, gravity, m * s, r, h);
                 *x += *v * dt;
-                *rot = S::rotate(*rot, *w, dt);
                 if any_periodic {
                     *x = x.wrap(lo, hi, period);
                 }

@@ -23,7 +23,8 @@ pub struct Grains<S: Space> {
     pub scale: Vec<f64>,
     /// Index into [`DemParams::materials`].
     pub material: Vec<u32>,
-    /// Frozen grains do not move (rough bases of benchmark beds); they still push.
+    /// Frozen grains take no force and move at their own velocity, unchanged by contacts:
+    /// rough bases of benchmark beds (at rest), the driven plate of a shear cell. They push.
     pub frozen: Vec<bool>,
     /// External force on each grain [N], added every step (coupling, tests).
     pub external: Vec<S::V>,

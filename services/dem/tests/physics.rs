@@ -102,6 +102,42 @@ fn zero_restitution_stops_an_impact_without_rebound() {
     }
 }
 
+/// A frozen grain driven at V (a shear cell's plate) hits a grain at rest head-on: it is an
+/// infinite mass, so the struck grain leaves at (1 + e) V (the impact in the driver's frame,
+/// restitution e against an immovable partner), and the driver goes on at V, unslowed.
+#[test]
+fn a_driven_frozen_grain_keeps_its_velocity_and_strikes_at_one_plus_e_times_it() {
+    fn strike<S: Space>(e: f64) -> (f64, f64, f64) {
+        let mut st = state::<S>(params(e, 0.5), [0.0; 3]);
+        let m = mass::<S>();
+        let v0 = 0.1;
+        let a = st.grains.push(0, S::from_array([-1.05 * RADIUS, 0.0, 0.0]), RADIUS, m, 0);
+        st.grains.push(1, S::from_array([1.05 * RADIUS, 0.0, 0.0]), RADIUS, m, 0);
+        st.grains.frozen[a] = true;
+        st.grains.v[a] = S::from_array([v0, 0.0, 0.0]);
+        let mut pipe = DemPipeline::<S>::new(1).unwrap();
+        // Contact time of a grain against an immovable partner: π √(m / k).
+        let t_c = std::f64::consts::PI * (m / KN).sqrt();
+        let dt = t_c / 400.0;
+        let steps = (3.0 * t_c / dt) as usize + (0.1 * RADIUS / v0 / dt) as usize;
+        pipe.run(&mut st, dt, steps);
+        let (a, b) = (st.grains.index_of(0).unwrap(), st.grains.index_of(1).unwrap());
+        let travelled = S::component(st.grains.x[a], 0) + 1.05 * RADIUS;
+        (
+            S::component(st.grains.v[b], 0) / v0,
+            S::component(st.grains.v[a], 0) / v0,
+            travelled / (v0 * steps as f64 * dt),
+        )
+    }
+    for e in [0.3, 0.9] {
+        for (dim, (struck, driver, travelled)) in [("2D", strike::<D2>(e)), ("3D", strike::<D3>(e))] {
+            assert_close(struck, 1.0 + e, 0.01, &format!("{dim} struck grain's speed over V, e = {e}"));
+            assert_eq!(driver, 1.0, "{dim}: the driver's velocity changed");
+            assert_close(travelled, 1.0, 1e-9, &format!("{dim} driver's travel over V t"));
+        }
+    }
+}
+
 fn floor<S: Space>(mu: f64) -> Wall<S> {
     Wall::plane(S::from_array([0.0; 3]), S::from_array([0.0, 1.0, 0.0]), mu)
 }
