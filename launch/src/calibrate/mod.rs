@@ -21,6 +21,11 @@
 //!
 //! `--write` records the result in the scene file: `friction_angle`, `young` and a
 //! `calibration` line saying where they come from, in the scene's `[material.mpm]`.
+//!
+//! `--shear` runs the constant-pressure simple shear of [`shear`] instead: the friction's
+//! rate dependence μ(I) and the shear's transient from a consolidated sample (printed only).
+
+pub mod shear;
 
 use anyhow::{Context, bail};
 use grains_dem::packing::lattice_in_box;
@@ -48,9 +53,20 @@ pub struct CalibrateArgs {
     /// Seed of the sample's radii and lattice jitter.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Write the result into the scene file's `[material.mpm]`.
+    /// Write the result into the scene file's `[material.mpm]` (the biaxial test's).
     #[arg(long)]
     pub write: bool,
+    /// Run the constant-pressure simple shear at `--inertials` instead of the biaxial test:
+    /// the friction's rate dependence μ(I) and the fit of `friction_angle_2` and `inertial_i0`
+    /// (printed, not written: see docs/user-guide.md).
+    #[arg(long, conflicts_with = "write")]
+    pub shear: bool,
+    /// Inertial numbers of the shear, increasing.
+    #[arg(long, value_delimiter = ',', default_values_t = [1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1])]
+    pub inertials: Vec<f64>,
+    /// Shear strain held at each inertial number (the first quarter is the transient).
+    #[arg(long, default_value_t = 2.0)]
+    pub strain: f64,
 }
 
 /// One record of the test.
@@ -228,6 +244,9 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
     // box's width and height then.
     let settle = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, target: f64| -> anyhow::Result<(f64, f64)> {
         for _ in 0..((2.0 / dt) as usize / SERVO_STEPS) {
+            if grains_service::signals::signalled() {
+                bail!("stopped by a signal");
+            }
             let (sxx, syy, w, h) = run(st, pipe, SERVO_STEPS);
             // Preparation only: the grains' velocities are damped (2 % per servo interval) so
             // that the sample comes to rest; the shear that is measured runs without it.
@@ -254,6 +273,9 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
     let mut next = FINE;
     let mut integral = 0.0;
     while next <= 0.3 + 1e-9 {
+        if grains_service::signals::signalled() {
+            bail!("stopped by a signal");
+        }
         // The top wall comes up to speed over the first 0.1 % of strain (a sudden start sends a
         // stress wave through the sample).
         let axial_now = 1.0 - (wall_at(&state.walls[3], 1) - wall_at(&state.walls[2], 1)) / h0;
@@ -410,6 +432,9 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
         inertial: args.inertial,
     };
     let mpm = scene.materials[material].mpm.as_ref().expect("checked");
+    if args.shear {
+        return shear_table(&scene, material, args, &options);
+    }
     tracing::info!("calibrate: biaxial test of `{}`: {options}", scene.materials[material].name);
     let (_, c) = run_for(&scene, &options)?;
     println!("axial_strain,volumetric_strain,sigma1_Pa,sigma3_Pa,phi_deg");
@@ -449,6 +474,64 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
             "calibrate: wrote friction_angle, young and calibration into {}",
             args.scene.display()
         );
+    }
+    Ok(())
+}
+
+/// `--shear`: the shear cell's table and the μ(I) fit.
+fn shear_table(scene: &Scene, material: usize, args: &CalibrateArgs, o: &CalibrateOptions) -> anyhow::Result<()> {
+    if args.inertials.windows(2).any(|w| w[1] <= w[0]) || args.inertials.iter().any(|&i| i.is_nan() || i <= 0.0) {
+        bail!(crate::run::BadInput(format!(
+            "--inertials: positive and increasing, got {:?}",
+            args.inertials
+        )));
+    }
+    tracing::info!(
+        "calibrate: constant-pressure simple shear of `{}`: --grains {} --seed {} --pressure {} at I = {:?}, strain {} each",
+        scene.materials[material].name,
+        o.grains,
+        o.seed,
+        o.pressure,
+        args.inertials,
+        args.strain
+    );
+    let shear = shear::simple_shear(scene, material, o.grains, o.pressure, &args.inertials, args.strain, o.seed)?;
+    println!(
+        "# the first shear's start, from the consolidated sample (packing {:.4})",
+        shear.packing0
+    );
+    println!("strain,sin_phi,mu_xy,packing");
+    for r in &shear.transient {
+        println!("{:.3},{:.4},{:.4},{:.4}", r.strain, r.sin_phi, r.mu, r.packing);
+    }
+    let points = &shear.points;
+    println!("inertial_target,inertial,pressure_Pa,sin_phi,sin_phi_sd,phi_deg,mu_xy,sxx_over_syy");
+    for p in points {
+        println!(
+            "{:e},{:.4e},{:.2},{:.4},{:.4},{:.2},{:.4},{:.3}",
+            p.target,
+            p.inertial,
+            p.pressure,
+            p.sin_phi,
+            p.spread,
+            p.sin_phi.asin().to_degrees(),
+            p.mu,
+            p.normal_ratio
+        );
+    }
+    match shear::fit(&points.iter().map(|p| (p.inertial, p.sin_phi)).collect::<Vec<_>>()) {
+        Some(f) if f.sin_dynamic > f.sin_static && f.sin_static > 0.0 && f.sin_dynamic < 1.0 => println!(
+            "# mu(I) on sin phi: friction_angle = {:.2}, friction_angle_2 = {:.2}, inertial_i0 = {:.4} (rms {:.4} in sin phi)",
+            f.sin_static.asin().to_degrees(),
+            f.sin_dynamic.asin().to_degrees(),
+            f.i0,
+            f.rms
+        ),
+        Some(f) => println!(
+            "# mu(I) fit out of the law's range (sin phi static {:.4}, dynamic {:.4}, I0 {:.4}): the friction does not grow with I here",
+            f.sin_static, f.sin_dynamic, f.i0
+        ),
+        None => println!("# mu(I): fewer than three inertial numbers, no fit"),
     }
     Ok(())
 }

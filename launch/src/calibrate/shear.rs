@@ -1,0 +1,399 @@
+//! `grains calibrate --shear`: the rate dependence of the grains' friction, μ(I), from a
+//! constant-pressure simple shear of the scene's grains (2D disks), the element test of GDR
+//! MiDi 2004 and da Cruz et al. 2005. The biaxial test of the parent module gives the
+//! quasi-static angle; a flow (a chute, a collapsing column) shears at larger inertial numbers.
+//!
+//! The cell: periodic along x, `--grains` grains between a floor row of frozen grains (rough,
+//! at rest) and a plate row of frozen grains driven at (V, v_y) (see `Grains::frozen`), no
+//! gravity. The plate's v_y holds σ_yy at p (a servo, as the biaxial test's walls); its V
+//! shears the layer at γ̇ = V / H, H the gap between the rows, for the inertial number
+//! I = γ̇ d / √(p / ρ). The stress is the Love–Weber average of the contacts' elastic forces
+//! over the cell, σ = (1 / A) Σ f ⊗ (x_i − x_j) (compression positive; the contacts' damping
+//! and the grains' kinetic stress are left out, small below I ≈ 0.3), and the friction is the
+//! continuum's own measure, sin φ = ‖dev σ‖ / (√2 p) with p = tr σ / 2, the plane
+//! Mohr–Coulomb ratio that `DruckerPragerYue` and its `InertialFriction` use. Each inertial
+//! number is held for `strain` of shear; the first quarter is left to the transient, the rest
+//! averaged. The targets run in increasing order on one sample, each starting from the state
+//! the slower one left.
+
+use anyhow::{Context, bail};
+use grains_dem::packing::lattice_in_box;
+use grains_dem::pipeline::DemPipeline;
+use grains_dem::space::{D2, Space};
+use grains_dem::state::{DemParams, DemState, Domain, Grains};
+use grains_grid::rng::{Rng, radius};
+use grains_protocol::scene::{Dimension, Scene};
+
+/// One inertial number's result.
+#[derive(Clone, Copy, Debug)]
+pub struct ShearPoint {
+    /// The inertial number asked for and the one measured (γ̇ d / √(p / ρ) with the measured
+    /// mean pressure).
+    pub target: f64,
+    pub inertial: f64,
+    /// Mean pressure tr σ / 2 over the window [Pa].
+    pub pressure: f64,
+    /// sin φ over the window, and its spread (standard deviation of ten sub-windows' means).
+    pub sin_phi: f64,
+    pub spread: f64,
+    /// The shear stress over the normal stress on the plate, τ_xy / σ_yy (GDR MiDi's μ): equal
+    /// to sin φ only when σ_xx = σ_yy, as in a Drucker–Prager continuum's simple shear.
+    pub mu: f64,
+    /// σ_xx / σ_yy over the window (the normal stress difference a coaxial continuum lacks).
+    pub normal_ratio: f64,
+}
+
+/// The first shear's start from the consolidated sample, averaged over every 0.01 of strain:
+/// the peak and the softening to the critical state that a rate-only law does not have.
+#[derive(Clone, Copy, Debug)]
+pub struct TransientRecord {
+    /// Shear strain γ since the start.
+    pub strain: f64,
+    pub sin_phi: f64,
+    /// τ_xy / σ_yy.
+    pub mu: f64,
+    /// Packing fraction Φ of the layer between the rows' centres (the rows count half).
+    pub packing: f64,
+}
+
+/// What the shear cell gives.
+#[derive(Clone, Debug)]
+pub struct Shear {
+    pub points: Vec<ShearPoint>,
+    pub transient: Vec<TransientRecord>,
+    /// Φ of the consolidated sample before the shear.
+    pub packing0: f64,
+}
+
+/// The μ(I) law on sin φ fitted to the points: sin φ(I) = s₁ + (s₂ − s₁) / (1 + I₀ / I).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateFit {
+    pub sin_static: f64,
+    pub sin_dynamic: f64,
+    pub i0: f64,
+    /// Root-mean-square residual of sin φ.
+    pub rms: f64,
+}
+
+/// Least squares of the law over I₀ (a log grid, 1e-3..10, refined once) with s₁, s₂ linear
+/// for each I₀: sin φ = s₁ (1 − w) + s₂ w with w = I / (I + I₀).
+pub fn fit(points: &[(f64, f64)]) -> Option<RateFit> {
+    if points.len() < 3 {
+        return None;
+    }
+    let solve = |i0: f64| -> Option<RateFit> {
+        // Normal equations of the two basis functions 1 − w and w.
+        let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(i, s) in points {
+            let w = i / (i + i0);
+            let u = 1.0 - w;
+            a11 += u * u;
+            a12 += u * w;
+            a22 += w * w;
+            b1 += u * s;
+            b2 += w * s;
+        }
+        let det = a11 * a22 - a12 * a12;
+        if det.abs() < 1e-14 {
+            return None;
+        }
+        let s1 = (b1 * a22 - b2 * a12) / det;
+        let s2 = (a11 * b2 - a12 * b1) / det;
+        let sq: f64 = points
+            .iter()
+            .map(|&(i, s)| {
+                let w = i / (i + i0);
+                (s1 * (1.0 - w) + s2 * w - s).powi(2)
+            })
+            .sum();
+        Some(RateFit {
+            sin_static: s1,
+            sin_dynamic: s2,
+            i0,
+            rms: (sq / points.len() as f64).sqrt(),
+        })
+    };
+    let best_on = |lo: f64, hi: f64| {
+        (0..=200)
+            .filter_map(|k| solve(lo * (hi / lo).powf(k as f64 / 200.0)))
+            .min_by(|a, b| a.rms.total_cmp(&b.rms))
+    };
+    let coarse = best_on(1e-3, 10.0)?;
+    best_on(coarse.i0 / 1.2, coarse.i0 * 1.2)
+}
+
+/// Grain ids: the floor row from 0, the plate row from `PLATE`, the sample from `SAMPLE`.
+const PLATE: u64 = 1 << 32;
+const SAMPLE: u64 = 1 << 33;
+
+/// Runs the shear cell of material `material` of `scene` at each of `inertials` (increasing).
+pub fn simple_shear(
+    scene: &Scene,
+    material: usize,
+    grains: usize,
+    pressure: f64,
+    inertials: &[f64],
+    strain: f64,
+    seed: u64,
+) -> anyhow::Result<Shear> {
+    if scene.dimension != Dimension::Two {
+        bail!(crate::run::BadInput(
+            "grains calibrate --shear runs the 2D shear cell; 3D is not built yet".into()
+        ));
+    }
+    let mat = &scene.materials[material];
+    let dem = mat.dem.as_ref().context("a DEM material")?;
+    let params = grains_dem_service::setup::contact_params(dem);
+    let r = dem.radius;
+    let d = 2.0 * r;
+    let r_max = r + 2.0 * dem.radius_std;
+    let spacing = 2.04 * r_max;
+    // Twice as wide as tall: cols ≈ √(N √3) columns of N / cols rows.
+    let cols = (grains as f64 * 3f64.sqrt()).sqrt().round().max(8.0);
+    let width = cols * spacing;
+    let rows = (grains as f64 / cols).ceil();
+    let height = rows * spacing * 3f64.sqrt() / 2.0 + 2.0 * r_max;
+    let mut state = DemState::<D2> {
+        grains: Grains::default(),
+        walls: Vec::new(),
+        params: DemParams {
+            materials: vec![params],
+            gravity: D2::from_array([0.0; 3]),
+            domain: Domain {
+                min: [0.0, -height, 0.0],
+                max: [width, 3.0 * height, 0.0],
+                periodic: [true, false, false],
+            },
+            skin: 0.1 * d,
+        },
+        time: 0.0,
+    };
+    // The rows: grains of the mean radius a shade apart (a whole number across the period).
+    let per_row = (width / (2.02 * r)).floor() as u64;
+    let (floor_y, plate_y0) = (0.0, r + height + r);
+    for k in 0..per_row {
+        let x = (k as f64 + 0.5) * width / per_row as f64;
+        for (id, y) in [(k, floor_y), (PLATE + k, plate_y0)] {
+            let i = state
+                .grains
+                .push(id, D2::from_array([x, y, 0.0]), r, Grains::<D2>::mass_of(r, mat.density), 0);
+            state.grains.frozen[i] = true;
+        }
+    }
+    let mut rng = Rng::new(seed);
+    let sites = lattice_in_box::<D2>([0.0, r, 0.0], [width, r + height, 0.0], spacing, 1.01 * r_max, 0.01 * r, &mut rng);
+    for (k, &x) in sites.iter().enumerate() {
+        let ri = radius(&mut rng, r, dem.radius_std);
+        state
+            .grains
+            .push(SAMPLE + k as u64, x, ri, Grains::<D2>::mass_of(ri, mat.density), 0);
+    }
+    let (dt, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
+    let mut pipe = DemPipeline::<D2>::new(scene.threads as usize)?;
+    let rate_of = |i: f64| i * (pressure / mat.density).sqrt() / d;
+    let plate_y = |st: &DemState<D2>| -> f64 {
+        let k = st.grains.id.iter().position(|id| (PLATE..SAMPLE).contains(id)).expect("the plate");
+        D2::to_array(st.grains.x[k])[1]
+    };
+    let drive = |st: &mut DemState<D2>, vx: f64, vy: f64| {
+        for (id, v) in st.grains.id.iter().zip(st.grains.v.iter_mut()) {
+            if (PLATE..SAMPLE).contains(id) {
+                *v = D2::from_array([vx, vy, 0.0]);
+            }
+        }
+    };
+    // The cell's stress [σxx, σyy, σxy] (Love–Weber, symmetrized) averaged over `n` steps,
+    // read every MEASURE steps.
+    const MEASURE: usize = 10;
+    let run = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, n: usize| -> [f64; 3] {
+        let mut sum = [0.0; 3];
+        let reads = (n / MEASURE).max(1);
+        for _ in 0..reads {
+            pipe.run(st, dt, MEASURE);
+            let area = width * (plate_y(st) - floor_y);
+            for (_, _, f, b) in pipe.contact_forces(st) {
+                let (f, b) = (D2::to_array(f), D2::to_array(b));
+                sum[0] += f[0] * b[0] / area;
+                sum[1] += f[1] * b[1] / area;
+                sum[2] += 0.5 * (f[0] * b[1] + f[1] * b[0]) / area;
+            }
+        }
+        sum.map(|s| s / reads as f64)
+    };
+    // The plate's servo, every SERVO steps: v_y = −(1 − σyy / p) γ̇_ref H, γ̇_ref the
+    // rate of I = 1e-3 or the shear's if faster (a quicker servo rings, as in the biaxial test).
+    const SERVO: usize = 50;
+    let servo = |st: &mut DemState<D2>, syy: f64, vx: f64, rate: f64| {
+        let h = plate_y(st) - floor_y;
+        let error = (1.0 - syy / pressure).clamp(-1.0, 1.0);
+        drive(st, vx, -error * rate.max(rate_of(1e-3)) * h);
+    };
+    // Consolidation to p at rest (damped, as the biaxial test's), at most 2 s.
+    let mut settled = false;
+    for _ in 0..((2.0 / dt) as usize / SERVO) {
+        if grains_service::signals::signalled() {
+            bail!("stopped by a signal");
+        }
+        let s = run(&mut state, &mut pipe, SERVO);
+        state
+            .grains
+            .v
+            .iter_mut()
+            .zip(&state.grains.frozen)
+            .filter(|(_, f)| !**f)
+            .for_each(|(v, _)| *v *= 0.98);
+        state.grains.omega.iter_mut().for_each(|w| *w *= 0.98);
+        let h = plate_y(&state) - floor_y;
+        // The sample's translational energy (the plate's own motion is not the sample's).
+        let g = &state.grains;
+        let ke: f64 = (0..g.len())
+            .filter(|&i| !g.frozen[i])
+            .map(|i| 0.5 * g.mass[i] * g.v[i].length_squared())
+            .sum();
+        if (s[1] / pressure - 1.0).abs() < 0.02 && ke < 1e-5 * pressure * width * h {
+            settled = true;
+            break;
+        }
+        servo(&mut state, s[1], 0.0, 0.0);
+    }
+    if !settled {
+        bail!("the shear cell did not settle at {pressure:.1} Pa within 2 s: stiffness, pressure or grain count out of reach");
+    }
+    // The packing fraction: the sample's disks and half the rows' over the gap's area.
+    let solid: f64 = (0..state.grains.len())
+        .map(|i| {
+            let a = std::f64::consts::PI * state.grains.radius[i].powi(2);
+            if state.grains.frozen[i] { 0.5 * a } else { a }
+        })
+        .sum();
+    let packing = |st: &DemState<D2>| solid / (width * (plate_y(st) - floor_y));
+    let packing0 = packing(&state);
+    let mut out = Vec::new();
+    let mut transient = Vec::new();
+    for &target in inertials {
+        let rate = rate_of(target);
+        let total = (strain / rate / dt) as usize;
+        let warm = total / 4;
+        let mut windows: Vec<[f64; 3]> = Vec::new();
+        let (mut step, mut s) = (0, [pressure, pressure, 0.0]);
+        while step < total {
+            if grains_service::signals::signalled() {
+                bail!("stopped by a signal");
+            }
+            let v = rate * (plate_y(&state) - floor_y);
+            servo(&mut state, s[1], v, rate);
+            s = run(&mut state, &mut pipe, SERVO);
+            if let Some(id) = DemPipeline::first_non_finite(&state) {
+                bail!("grain {id} is not finite: the shear cell blew up at I = {target}");
+            }
+            if step >= warm {
+                windows.push(s);
+            }
+            step += SERVO;
+            if out.is_empty() {
+                let strain = rate * dt * step as f64;
+                let bin = (strain / 0.01).ceil() * 0.01;
+                let p = 0.5 * (s[0] + s[1]);
+                let rec = TransientRecord {
+                    strain: bin,
+                    sin_phi: (0.25 * (s[0] - s[1]).powi(2) + s[2] * s[2]).sqrt() / p,
+                    mu: s[2].abs() / s[1],
+                    packing: packing(&state),
+                };
+                transient.push((1usize, rec));
+                // Merge into the bin's running mean.
+                if transient.len() >= 2 && (transient[transient.len() - 2].1.strain - bin).abs() < 1e-9 {
+                    let (n, last) = transient.pop().expect("pushed");
+                    let (m, prev) = transient.last_mut().expect("two");
+                    let w = n as f64 / (*m + n) as f64;
+                    prev.sin_phi += w * (last.sin_phi - prev.sin_phi);
+                    prev.mu += w * (last.mu - prev.mu);
+                    prev.packing += w * (last.packing - prev.packing);
+                    *m += n;
+                }
+            }
+        }
+        // Ten sub-windows' means: their mean is the point, their spread its noise.
+        let chunk = windows.len().div_ceil(10).max(1);
+        let of = |m: &[f64; 3]| {
+            let p = 0.5 * (m[0] + m[1]);
+            (p, (0.25 * (m[0] - m[1]).powi(2) + m[2] * m[2]).sqrt() / p)
+        };
+        let means: Vec<[f64; 3]> = windows
+            .chunks(chunk)
+            .map(|c| {
+                let mut m = [0.0; 3];
+                c.iter().for_each(|w| (0..3).for_each(|a| m[a] += w[a] / c.len() as f64));
+                m
+            })
+            .collect();
+        let mut all = [0.0; 3];
+        windows
+            .iter()
+            .for_each(|w| (0..3).for_each(|a| all[a] += w[a] / windows.len() as f64));
+        let (p, sin_phi) = of(&all);
+        let subs: Vec<f64> = means.iter().map(|m| of(m).1).collect();
+        let spread = (subs.iter().map(|x| (x - sin_phi).powi(2)).sum::<f64>() / subs.len() as f64).sqrt();
+        let inertial = rate * d / (p / mat.density).sqrt();
+        tracing::info!(
+            "calibrate --shear: I = {target:e} (measured {inertial:.3e}): p {p:.1} Pa, phi {:.2} deg (sd {:.2})",
+            sin_phi.asin().to_degrees(),
+            spread.asin().to_degrees()
+        );
+        out.push(ShearPoint {
+            target,
+            inertial,
+            pressure: p,
+            sin_phi,
+            spread,
+            mu: all[2].abs() / all[1],
+            normal_ratio: all[0] / all[1],
+        });
+    }
+    Ok(Shear {
+        points: out,
+        transient: transient.into_iter().map(|(_, r)| r).collect(),
+        packing0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cell shears at the inertial number asked (γ̇ = V / H with the plate driven at V)
+    /// with σ_yy held at p by the plate's servo: the measured I within 10 % (its p is the mean
+    /// pressure, below σ_yy by the normal-stress difference), σ_yy within 5 %, and a friction between zero and the contacts' μ (a layer that did not
+    /// shear, with the plate sliding over it or standing still, gives none of these).
+    #[test]
+    fn the_cell_shears_at_the_inertial_number_asked_at_constant_pressure() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/chute_hybrid_2d.toml");
+        let scene = grains_protocol::scene::load(&path).unwrap();
+        let material = scene.bodies[0].material;
+        let mu_contact = scene.materials[material].dem.as_ref().unwrap().friction;
+        let out = simple_shear(&scene, material, 400, 800.0, &[0.03], 0.5, 1).unwrap();
+        let p = out.points[0];
+        assert!((p.inertial / 0.03 - 1.0).abs() < 0.1, "{p:?}");
+        let syy = 2.0 * p.pressure / (1.0 + p.normal_ratio);
+        assert!((syy / 800.0 - 1.0).abs() < 0.05, "σ_yy {syy:.1} Pa: {p:?}");
+        assert!(p.mu > 0.05 && p.mu < mu_contact, "{p:?}");
+        assert!(out.packing0 > 0.7 && out.packing0 < 0.9, "{}", out.packing0);
+        assert!(!out.transient.is_empty());
+    }
+
+    /// The fit gives back the law it is fed (sin φ from known s₁, s₂, I₀ at six inertial
+    /// numbers), and refuses fewer than three points.
+    #[test]
+    fn the_fit_recovers_a_known_law() {
+        let (s1, s2, i0) = (0.25, 0.55, 0.08);
+        let points: Vec<(f64, f64)> = [1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3]
+            .iter()
+            .map(|&i| (i, s1 + (s2 - s1) / (1.0 + i0 / i)))
+            .collect();
+        let f = fit(&points).unwrap();
+        assert!((f.sin_static - s1).abs() < 1e-3, "{f:?}");
+        assert!((f.sin_dynamic - s2).abs() < 5e-3, "{f:?}");
+        assert!((f.i0 / i0 - 1.0).abs() < 0.02, "{f:?}");
+        assert!(fit(&points[..2]).is_none());
+    }
+}
