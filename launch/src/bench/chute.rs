@@ -44,6 +44,21 @@ pub struct ChuteArgs {
     /// Where the packings, runs, table and charts go.
     #[arg(long, default_value = "out/bench/chute")]
     pub out: PathBuf,
+    /// The hybrid's continuum: the scene's (`scene`), or Chen 2021's critical-state softening
+    /// calibrated per grain size on `grains calibrate --shear`'s first shear (I = 1e-3, strain
+    /// 2, `--cell-grains` grains at the scene's default pressure) and started at the poured bed's packing
+    /// fraction (`critical-state`).
+    #[arg(long, value_enum, default_value_t = Continuum::Scene)]
+    pub continuum: Continuum,
+    /// Grains of the shear cell of `--continuum critical-state` (more: less noise in its Φ).
+    #[arg(long, default_value_t = 2400)]
+    pub cell_grains: usize,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Continuum {
+    Scene,
+    CriticalState,
 }
 
 const SCENE: &str = "chute_hybrid_2d.toml";
@@ -101,6 +116,54 @@ fn dem_step(scene: &Path, overrides: &[String]) -> anyhow::Result<f64> {
     let (s, _) = grains_protocol::scene::load_with_overrides(scene, &o)?;
     let (safe, ..) = grains_dem_service::setup::stable_step(&s).context("the chute has DEM grains")?;
     Ok(safe * (1.0 - 1e-6))
+}
+
+/// The layer's continuum as Chen 2021's critical-state softening: its parameters from the
+/// shear cell of these grains (not from the chute), its initial packing fraction the poured
+/// bed's, read with the cell's estimator over the middle half of the layer.
+fn critical_state_overrides(args: &ChuteArgs, base: &[String], packing: &Path) -> anyhow::Result<Vec<String>> {
+    use crate::calibrate::{default_pressure, shear};
+    let (scene, _) = grains_protocol::scene::load_with_overrides(&args.scenes.join(SCENE), base)?;
+    let material = crate::calibrate::hybrid_material(&scene)?;
+    let pressure = default_pressure(&scene, material);
+    let (grains, strain, seed) = (args.cell_grains, 2.0, 1);
+    tracing::info!("bench chute: the critical-state continuum from the shear cell ({grains} grains at {pressure:.0} Pa, I = 1e-3)");
+    let cell = shear::simple_shear(&scene, material, grains, pressure, &[1e-3], strain, seed)?;
+    let Some(c) = shear::critical_state(&cell.transient) else {
+        anyhow::bail!("the shear cell's sample has no peak denser than its critical state: no critical-state continuum to fit");
+    };
+    let grains_protocol::scene::Shape::Box { min, max } = scene.bodies[0].shape else {
+        anyhow::bail!("the chute's layer is a box");
+    };
+    let bed = grains_dem_service::lammps_data::read(packing).map_err(anyhow::Error::msg)?;
+    let inside = bed
+        .atoms
+        .iter()
+        .filter(|a| a.kind != 2 && (min[0]..=max[0]).contains(&a.x[0]))
+        .map(|a| (a.x[1], 0.5 * a.diameter));
+    let (lo, hi) = (min[1] + 0.25 * (max[1] - min[1]), min[1] + 0.75 * (max[1] - min[1]));
+    let phi0 = shear::band_packing(inside, lo, hi, max[0] - min[0]);
+    tracing::info!(
+        "bench chute: critical state phi_cs {:.2} deg, packing_critical {:.4}, chi {:.2}, xi {:.2} (peak sin phi {:.4} at packing {:.4});          the bed's packing {phi0:.4}",
+        c.friction_angle,
+        c.packing_critical,
+        c.chi,
+        c.xi,
+        c.peak_sin,
+        c.peak_packing
+    );
+    Ok(vec![
+        "material.0.mpm.model=\"critical_state\"".into(),
+        format!("material.0.mpm.friction_angle={:.4}", c.friction_angle),
+        format!("material.0.mpm.packing_critical={:.5}", c.packing_critical),
+        format!("material.0.mpm.chi={:.4}", c.chi),
+        format!("material.0.mpm.xi={:.4}", c.xi),
+        format!("material.0.mpm.packing={phi0:.5}"),
+        format!(
+            "material.0.mpm.calibration=\"grains calibrate --shear --grains {grains} --seed {seed} --pressure {pressure} \
+             --inertials 1e-3 --strain {strain}: first shear's critical state (bench chute); packing: the poured bed's\""
+        ),
+    ])
 }
 
 struct Row {
@@ -168,6 +231,10 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             format!("run.duration={}", args.window),
         ]);
         let dt = dem_step(&args.scenes.join(SCENE), &base)?;
+        let continuum = match args.continuum {
+            Continuum::Scene => Vec::new(),
+            Continuum::CriticalState => critical_state_overrides(args, &base, &packing)?,
+        };
         let mut o = base.clone();
         // The same DEM step, 20 to a macro-step: the launcher's per-macro-step cost (summaries,
         // metrics) stays out of the DEM's figure.
@@ -192,6 +259,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
         for &h in &args.cells {
             for &f in &args.depths {
                 let mut o = base.clone();
+                o.extend(continuum.iter().cloned());
                 o.extend([
                     format!("domain.cell_size={h}"),
                     format!("domain.min=[0.0,{:e}]", -3.0 * h),
@@ -289,10 +357,17 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
         "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
          from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
          solvers on one each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
-         hybrid's. Flux: Σ m v_x / L at the end of the window. Coupled band: {} cell(s).\n\n\
+         hybrid's. Flux: Σ m v_x / L at the end of the window. Coupled band: {} cell(s). Continuum: {}.\n\n\
          | run | r mm | H mm | N_i | F | MPM points | k | wall s | speed-up | DEM / MPM compute ms per macro-step | flux kg/(m s) | flux vs DEM |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
-        args.depth, args.window, args.band
+        args.depth,
+        args.window,
+        args.band,
+        match args.continuum {
+            Continuum::Scene => "the scene's",
+            Continuum::CriticalState =>
+                "critical-state softening (Chen 2021) fitted to the shear cell's first shear per grain size, from the poured bed's packing",
+        }
     );
     for r in rows {
         let speedup = dem_wall(rows, r.radius) / r.sample.wall;

@@ -122,7 +122,7 @@ impl Calibration {
 }
 
 /// The material of a scene to calibrate: its first hybrid body's.
-fn hybrid_material(scene: &Scene) -> anyhow::Result<usize> {
+pub fn hybrid_material(scene: &Scene) -> anyhow::Result<usize> {
     let Some(b) = scene.bodies.iter().find(|b| b.model == Model::Hybrid) else {
         bail!(crate::run::BadInput(format!(
             "{}: grains calibrate needs a scene with a hybrid body (its DEM grains set the continuum's parameters)",
@@ -141,7 +141,7 @@ fn hybrid_material(scene: &Scene) -> anyhow::Result<usize> {
 }
 
 /// The default confining pressure: the weight of half the hybrid body's height.
-fn default_pressure(scene: &Scene, material: usize) -> f64 {
+pub fn default_pressure(scene: &Scene, material: usize) -> f64 {
     let m = &scene.materials[material];
     let packing = m.mpm.as_ref().map_or(1.0, |p| p.packing);
     let g = scene.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -503,6 +503,14 @@ fn shear_table(scene: &Scene, material: usize, args: &CalibrateArgs, o: &Calibra
     println!("strain,sin_phi,mu_xy,packing");
     for r in &shear.transient {
         println!("{:.3},{:.4},{:.4},{:.4}", r.strain, r.sin_phi, r.mu, r.packing);
+    }
+    match shear::critical_state(&shear.transient) {
+        Some(c) => println!(
+            "# critical state (model = \"critical_state\"): friction_angle = {:.2}, packing_critical = {:.4}, chi = {:.2}, xi = {:.2} \
+             (peak sin phi {:.4} at strain {:.2}, packing {:.4})",
+            c.friction_angle, c.packing_critical, c.chi, c.xi, c.peak_sin, c.peak_strain, c.peak_packing
+        ),
+        None => println!("# critical state: no peak denser than the critical state in the first shear"),
     }
     let points = &shear.points;
     println!("inertial_target,inertial,pressure_Pa,sin_phi,sin_phi_sd,phi_deg,mu_xy,sxx_over_syy");

@@ -52,7 +52,7 @@ pub struct TransientRecord {
     pub sin_phi: f64,
     /// τ_xy / σ_yy.
     pub mu: f64,
-    /// Packing fraction Φ of the layer between the rows' centres (the rows count half).
+    /// Packing fraction Φ of the middle half of the layer.
     pub packing: f64,
 }
 
@@ -120,6 +120,85 @@ pub fn fit(points: &[(f64, f64)]) -> Option<RateFit> {
     };
     let coarse = best_on(1e-3, 10.0)?;
     best_on(coarse.i0 / 1.2, coarse.i0 * 1.2)
+}
+
+/// Chen 2021's critical-state softening (`model = "critical_state"`: tan φ = tan φ_cs +
+/// χ (Φ − Φ_cs), dΦ/ds = −ξ Φ (Φ − Φ_cs) per unit plastic strain s) read off the first
+/// shear's start: Φ_cs and sin φ_cs the means over its second half; the peak the largest
+/// five-record (0.05 of strain) running mean of sin φ in its first half, with Φ's running mean
+/// there, for χ; ξ the least-squares fit of the exact solution of the Φ law from the peak on,
+/// with the plastic strain taken as the shear's Frobenius norm γ / √2 (the elastic part is
+/// small past the peak).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CriticalStateFit {
+    /// φ_cs [degrees].
+    pub friction_angle: f64,
+    pub packing_critical: f64,
+    pub chi: f64,
+    pub xi: f64,
+    /// The peak: sin φ, Φ and γ.
+    pub peak_sin: f64,
+    pub peak_packing: f64,
+    pub peak_strain: f64,
+}
+
+/// `None` when the records hold no peak denser than the critical state (a loose sample).
+pub fn critical_state(t: &[TransientRecord]) -> Option<CriticalStateFit> {
+    let last = t.last()?.strain;
+    let late: Vec<&TransientRecord> = t.iter().filter(|r| r.strain > 0.5 * last).collect();
+    if late.len() < 5 || t.len() < 10 {
+        return None;
+    }
+    let mean = |f: &dyn Fn(&TransientRecord) -> f64, rs: &[&TransientRecord]| rs.iter().map(|r| f(r)).sum::<f64>() / rs.len() as f64;
+    let packing_critical = mean(&|r| r.packing, &late);
+    let sin_cs = mean(&|r| r.sin_phi, &late);
+    let tan = |s: f64| s / (1.0 - s * s).sqrt();
+    let (k, peak_sin, peak_packing) = (2..t.len() - 2)
+        .filter(|&k| t[k].strain <= 0.5 * last)
+        .map(|k| {
+            let w = &t[k - 2..=k + 2];
+            (
+                k,
+                w.iter().map(|r| r.sin_phi).sum::<f64>() / 5.0,
+                w.iter().map(|r| r.packing).sum::<f64>() / 5.0,
+            )
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    if peak_packing <= packing_critical || peak_sin <= sin_cs {
+        return None;
+    }
+    let chi = (tan(peak_sin) - tan(sin_cs)) / (peak_packing - packing_critical);
+    let peak_strain = t[k].strain;
+    let after: Vec<(f64, f64)> = t[k..].iter().map(|r| ((r.strain - peak_strain) / 2f64.sqrt(), r.packing)).collect();
+    let model = |xi: f64, s: f64| {
+        let decay = (-xi * packing_critical * s).exp();
+        packing_critical * peak_packing / (peak_packing + (packing_critical - peak_packing) * decay)
+    };
+    let sse = |xi: f64| after.iter().map(|&(s, phi)| (model(xi, s) - phi).powi(2)).sum::<f64>();
+    let xi = (0..=400)
+        .map(|j| 0.1 * 1e4f64.powf(j as f64 / 400.0))
+        .min_by(|a, b| sse(*a).total_cmp(&sse(*b)))?;
+    Some(CriticalStateFit {
+        friction_angle: sin_cs.asin().to_degrees(),
+        packing_critical,
+        chi,
+        xi,
+        peak_sin,
+        peak_packing,
+        peak_strain,
+    })
+}
+
+/// The packing fraction of disks (centre height y, radius r) whose centres lie in the band
+/// lo ≤ y < hi of a layer `width` wide: the estimator the shear cell reads its sample with and
+/// `grains bench chute` its poured bed (the layers by a wall or a row are looser: keep the band
+/// inside).
+pub fn band_packing(disks: impl Iterator<Item = (f64, f64)>, lo: f64, hi: f64, width: f64) -> f64 {
+    let solid: f64 = disks
+        .filter(|(y, _)| (lo..hi).contains(y))
+        .map(|(_, r)| std::f64::consts::PI * r * r)
+        .sum();
+    solid / (width * (hi - lo))
 }
 
 /// Grain ids: the floor row from 0, the plate row from `PLATE`, the sample from `SAMPLE`.
@@ -259,14 +338,17 @@ pub fn simple_shear(
     if !settled {
         bail!("the shear cell did not settle at {pressure:.1} Pa within 2 s: stiffness, pressure or grain count out of reach");
     }
-    // The packing fraction: the sample's disks and half the rows' over the gap's area.
-    let solid: f64 = (0..state.grains.len())
-        .map(|i| {
-            let a = std::f64::consts::PI * state.grains.radius[i].powi(2);
-            if state.grains.frozen[i] { 0.5 * a } else { a }
-        })
-        .sum();
-    let packing = |st: &DemState<D2>| solid / (width * (plate_y(st) - floor_y));
+    // The packing fraction of the middle half of the gap (the layers by the rows are looser,
+    // as by any wall): the disks whose centres lie in it over its area, the estimator that
+    // reads a bed's packing the same way (`grains pack`'s output by depth).
+    let packing = |st: &DemState<D2>| {
+        let top = plate_y(st);
+        let g = &st.grains;
+        let disks = (0..g.len())
+            .filter(|&i| !g.frozen[i])
+            .map(|i| (D2::to_array(g.x[i])[1], g.radius[i]));
+        band_packing(disks, floor_y + 0.25 * (top - floor_y), floor_y + 0.75 * (top - floor_y), width)
+    };
     let packing0 = packing(&state);
     let mut out = Vec::new();
     let mut transient = Vec::new();
@@ -379,6 +461,48 @@ mod tests {
         assert!(p.mu > 0.05 && p.mu < mu_contact, "{p:?}");
         assert!(out.packing0 > 0.7 && out.packing0 < 0.9, "{}", out.packing0);
         assert!(!out.transient.is_empty());
+    }
+
+    /// Records made by the critical-state law itself (Φ from 0.83 to Φ_cs = 0.816 by the
+    /// exact solution with ξ = 10 over s = γ / √2, tan φ = tan φ_cs + χ (Φ − Φ_cs) with
+    /// χ = 12 and φ_cs = 15°, after a rise to the peak over the first 0.1 of strain, as the
+    /// cell's elastic start) give those parameters back.
+    #[test]
+    fn the_critical_state_fit_recovers_the_law_it_is_fed() {
+        let (pcs, chi, xi, p0) = (0.816, 12.0, 10.0, 0.83);
+        let tan_cs = 15f64.to_radians().tan();
+        let sin_of = |tan: f64| tan / (1.0 + tan * tan).sqrt();
+        let peak_at = 0.1;
+        let records: Vec<TransientRecord> = (1..=200)
+            .map(|k| {
+                let strain = 0.01 * k as f64;
+                let s = (strain - peak_at).max(0.0) / 2f64.sqrt();
+                let packing = pcs * p0 / (p0 + (pcs - p0) * (-xi * pcs * s).exp());
+                let tan = tan_cs + chi * (packing - pcs);
+                let sin_phi = sin_of(tan) * (strain / peak_at).min(1.0);
+                TransientRecord {
+                    strain,
+                    sin_phi,
+                    mu: sin_phi,
+                    packing,
+                }
+            })
+            .collect();
+        let f = critical_state(&records).unwrap();
+        assert!((f.packing_critical - pcs).abs() < 1e-4, "{f:?}");
+        assert!((f.friction_angle - 15.0).abs() < 0.05, "{f:?}");
+        // The five-record mean rounds the peak off: χ within 5 %.
+        assert!((f.chi / chi - 1.0).abs() < 0.05, "{f:?}");
+        assert!((f.xi / xi - 1.0).abs() < 0.05, "{f:?}");
+        // A sample looser than its critical state has no peak to read.
+        let loose: Vec<TransientRecord> = records
+            .iter()
+            .map(|r| TransientRecord {
+                packing: 2.0 * pcs - r.packing,
+                ..*r
+            })
+            .collect();
+        assert!(critical_state(&loose).is_none());
     }
 
     /// The fit gives back the law it is fed (sin φ from known s₁, s₂, I₀ at six inertial
