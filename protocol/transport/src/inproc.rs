@@ -155,7 +155,7 @@ impl crate::Transport for InProc {
     }
 
     fn dead_peers(&self) -> Vec<String> {
-        std::mem::take(&mut *self.bus.dead.lock().expect("bus lock"))
+        self.bus.dead.lock().expect("bus lock").clone()
     }
 }
 

@@ -56,6 +56,12 @@ pub fn run_config(run_id: &str) -> Result<Config, TransportError> {
     let prefix = grains_protocol::names::domain_prefix(run_id);
     let mut config = Config::global_config().clone();
     config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| open_err("domain prefix", e))?;
+    // No node removes a dead one as it comes or goes: every participant must see a death
+    // ([`crate::Transport::dead_peers`]). Left on, a participant stopping at its launcher's
+    // death removed the launcher's node on its way out, and three others, which had not
+    // seen it yet, waited on it for ever. The run's end, or the next run, removes the remains.
+    config.global.node.cleanup_dead_nodes_on_creation = false;
+    config.global.node.cleanup_dead_nodes_on_destruction = false;
     Ok(config)
 }
 
@@ -187,8 +193,9 @@ impl crate::Transport for Iceoryx2 {
                     Some(d) => format!("{} (pid {})", d.name().as_str(), d.process_id().value()),
                     None => "an unnamed participant".to_string(),
                 };
+                // Looked at, not removed: a dead node one participant cleans up is gone for
+                // the others, which then never learn of the death (see `run_config`).
                 dead.push(who);
-                let _ = view.try_remove_stale_resources();
             }
             CallbackProgression::Continue
         });

@@ -75,8 +75,9 @@ pub trait Transport {
     /// Opens (creating if needed) `spec` for receiving.
     fn subscriber<E: Pod + ZeroCopy, H: Pod + ZeroCopy>(&self, spec: &ServiceSpec) -> Result<Self::Subscriber<E, H>, TransportError>;
 
-    /// Participants of the run found dead since the last call, as "name (pid N)". Their
-    /// resources are cleaned up on the way.
+    /// Participants of the run found dead, as "name (pid N)", on every call while their
+    /// remains last: every participant must see a death, so none removes them (the run's
+    /// end or the next run does).
     fn dead_peers(&self) -> Vec<String>;
 }
 

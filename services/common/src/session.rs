@@ -185,6 +185,14 @@ impl<'t, T: Transport> Session<'t, T> {
         if self.stop.is_set() {
             bail!(Halt::Interrupted);
         }
+        self.watch_peers()
+    }
+
+    /// Dead peers every few hundred milliseconds, whether this participant waited or not: in a
+    /// coupled run each peer's message can arrive within every poll, so the empty polls of
+    /// [`Session::check_alive`] may never come, and a run whose launcher was killed stepped on
+    /// (seen once in the system test of the launcher's death). Call it once per step.
+    pub fn watch_peers(&self) -> anyhow::Result<()> {
         if self.last_dead_check.get().elapsed() >= POLL * DEAD_CHECK_EVERY {
             self.last_dead_check.set(Instant::now());
             self.check_dead("its next step")?;

@@ -330,6 +330,7 @@ pub fn run<T: Transport, S: Solver>(
     let mut solver = make(&zones)?;
     session.ready()?;
     loop {
+        session.watch_peers()?;
         let wait_start = Instant::now();
         let Some(window) = next_step(&session, &mut ports.step_sub)? else {
             return Ok(());

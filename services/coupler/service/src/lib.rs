@@ -27,6 +27,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 
     let mut last = 0;
     for step in 1..=scene.steps {
+        session.watch_peers()?;
         grains_service::telemetry::set_step(Some(step));
         if !ports.obey(&session, scene, step)? {
             break;

@@ -137,6 +137,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     };
     let mut compute = field_time;
     loop {
+        session.watch_peers()?;
         let wait_start = Instant::now();
         let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
