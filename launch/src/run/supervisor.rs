@@ -285,7 +285,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             // The bridge is our child: its end is seen by `watch_bridge`.
             let dead: Vec<_> = self
                 .transport
-                .dead_peers()
+                .dead_peers(&|name| name == Role::Bridge.binary())
                 .into_iter()
                 .filter(|d| !d.starts_with(Role::Bridge.binary()))
                 .collect();

@@ -154,7 +154,7 @@ impl crate::Transport for InProc {
         Ok(InProcSubscriber { channel, queue })
     }
 
-    fn dead_peers(&self) -> Vec<String> {
+    fn dead_peers(&self, _remove: &dyn Fn(&str) -> bool) -> Vec<String> {
         self.bus.dead.lock().expect("bus lock").clone()
     }
 }

@@ -185,17 +185,22 @@ impl crate::Transport for Iceoryx2 {
         })
     }
 
-    fn dead_peers(&self) -> Vec<String> {
+    fn dead_peers(&self, remove: &dyn Fn(&str) -> bool) -> Vec<String> {
         let mut dead = Vec::new();
         let _ = Node::<Ipc>::list(self.node.config(), |state| {
             if let NodeState::Dead(view) = state {
-                let who = match view.details() {
-                    Some(d) => format!("{} (pid {})", d.name().as_str(), d.process_id().value()),
-                    None => "an unnamed participant".to_string(),
+                let name = view.details().as_ref().map(|d| d.name().as_str().to_string());
+                let who = match (&name, view.details()) {
+                    (Some(n), Some(d)) => format!("{n} (pid {})", d.process_id().value()),
+                    _ => "an unnamed participant".to_string(),
                 };
-                // Looked at, not removed: a dead node one participant cleans up is gone for
-                // the others, which then never learn of the death (see `run_config`).
                 dead.push(who);
+                // Only an expendable peer's remains go now (a dead subscriber's ports would
+                // stall every publisher); any other dead node stays for every participant to
+                // see (see `run_config`).
+                if name.as_deref().is_some_and(remove) {
+                    let _ = view.try_remove_stale_resources();
+                }
             }
             CallbackProgression::Continue
         });

@@ -76,9 +76,10 @@ pub trait Transport {
     fn subscriber<E: Pod + ZeroCopy, H: Pod + ZeroCopy>(&self, spec: &ServiceSpec) -> Result<Self::Subscriber<E, H>, TransportError>;
 
     /// Participants of the run found dead, as "name (pid N)", on every call while their
-    /// remains last: every participant must see a death, so none removes them (the run's
-    /// end or the next run does).
-    fn dead_peers(&self) -> Vec<String>;
+    /// remains last. Every participant must see a death, so the remains stay (the run's end
+    /// or the next run removes them), except those of the dead whose node name `remove`
+    /// accepts: an expendable peer (the bridge) whose dead ports would stall the run.
+    fn dead_peers(&self, remove: &dyn Fn(&str) -> bool) -> Vec<String>;
 }
 
 pub trait Publisher<E, H> {

@@ -363,7 +363,7 @@ impl<'a, T: Transport> Bridge<'a, T> {
                 tracing::info!("run {} has ended", self.run);
                 return true;
             }
-            for dead in t.dead_peers() {
+            for dead in t.dead_peers(&|_| false) {
                 self.alive.retain(|role| {
                     let gone = dead.starts_with(&format!("{} ", role.binary()));
                     if gone {

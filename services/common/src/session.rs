@@ -203,7 +203,12 @@ impl<'t, T: Transport> Session<'t, T> {
     fn check_dead(&self, waiting_for: &str) -> anyhow::Result<()> {
         // The bridge is expendable: the run goes on without it (the launcher warns).
         let bridge = grains_protocol::Role::Bridge.binary();
-        let dead: Vec<String> = self.transport.dead_peers().into_iter().filter(|d| !d.starts_with(bridge)).collect();
+        let dead: Vec<String> = self
+            .transport
+            .dead_peers(&|name| name == bridge)
+            .into_iter()
+            .filter(|d| !d.starts_with(bridge))
+            .collect();
         if !dead.is_empty() {
             bail!(Halt::PeerDied(format!(
                 "{} died while {} waited for {waiting_for}",
