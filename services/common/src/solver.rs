@@ -330,11 +330,12 @@ pub fn run<T: Transport, S: Solver>(
     let mut solver = make(&zones)?;
     session.ready()?;
     loop {
-        session.watch_peers()?;
         let wait_start = Instant::now();
         let Some(window) = next_step(&session, &mut ports.step_sub)? else {
             return Ok(());
         };
+        // Only once the step is in hand: after the last one the coupler may be exiting.
+        session.watch_peers()?;
         crate::telemetry::set_step(Some(window.step));
         let wait = wait_start.elapsed();
         ports.step(&session, scene, opts, &window, &mut solver, wait)?;

@@ -137,11 +137,12 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     };
     let mut compute = field_time;
     loop {
-        session.watch_peers()?;
         let wait_start = Instant::now();
         let Some(window) = next_step(&session, &mut step_sub)? else {
             return Ok(());
         };
+        // Only once the step is in hand: after the last one the coupler may be exiting.
+        session.watch_peers()?;
         grains_service::telemetry::set_step(Some(window.step));
         let mut wait = wait_start.elapsed();
         report.mass = 0.0;
