@@ -411,13 +411,13 @@ fn snapshot_and_set_take_effect_at_the_acknowledged_step() {
 }
 
 /// A remote client that subscribes to the views and never reads them
-/// (`tests/python/stalled_viewer.py`, stopped with SIGSTOP once subscribed) does not slow the run by more than 5% (issue 7): the same
-/// run with and without such a client, alternating, fastest of five each (the machine is
-/// shared: the fastest run is the least disturbed; with three, a CI machine 1.6× slower than
-/// ours once saw +5.8% where ours sees −3%).
+/// (`tests/python/stalled_viewer.py`, stopped with SIGSTOP once subscribed) does not slow the
+/// run by more than 5% (issue 7): the same run with and without such a client, alternating,
+/// fastest of five each (the machine is shared: the fastest run is the least disturbed). Nor
+/// does it hold up the run's end: the bridge ends by itself, not killed by the launcher. (It
+/// once was: zenoh waited for the client's socket to close the session, the launcher killed
+/// the bridge after 2 s and counted them in the run's wall time: 5.193 s against 3.130 s.)
 #[test]
-#[ignore = "fails: a client stopped once subscribed slows the run by 66% (5.193 s against 3.130 s, 2026-12-02); \
-            a client that blocks in its callback hid it, its zenoh threads still drain the socket; run with --ignored"]
 fn a_client_that_never_reads_views_does_not_slow_the_run() {
     // The clients' Python first: if it cannot be had, fail before any run starts.
     grains_system_tests::python();
@@ -461,6 +461,11 @@ fn a_client_that_never_reads_views_does_not_slow_the_run() {
             child
         });
         assert!(launcher.wait_exit(Duration::from_secs(120)).success(), "{}", launcher.stderr());
+        assert!(
+            !launcher.stderr().contains("the bridge did not end"),
+            "the launcher had to kill the bridge: {}",
+            launcher.stderr()
+        );
         if let Some(mut v) = viewer {
             let _ = v.kill();
             let _ = v.wait();

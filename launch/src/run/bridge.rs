@@ -82,8 +82,8 @@ impl Bridge {
         Some(how)
     }
 
-    /// Stops the bridge (SIGTERM, then SIGKILL after `grace`).
-    pub fn stop(&mut self, grace: Duration) {
+    /// Stops the bridge (SIGTERM, then SIGKILL after `grace`). False if it had to be killed.
+    pub fn stop(&mut self, grace: Duration) -> bool {
         match std::mem::replace(self, Bridge::Ended) {
             Bridge::Process(mut c) => {
                 // SAFETY: plain kill(2) on our own child, not yet reaped.
@@ -91,18 +91,20 @@ impl Bridge {
                 let deadline = Instant::now() + grace;
                 while Instant::now() < deadline {
                     if let Ok(Some(_)) = c.try_wait() {
-                        return;
+                        return true;
                     }
                     std::thread::sleep(Duration::from_millis(10));
                 }
                 let _ = c.kill();
                 let _ = c.wait();
+                false
             }
             Bridge::Thread(h, stop) => {
                 stop.set();
                 let _ = h.join();
+                true
             }
-            Bridge::Ended => {}
+            Bridge::Ended => true,
         }
     }
 }

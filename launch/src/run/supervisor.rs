@@ -23,6 +23,8 @@ const WAIT: Duration = Duration::from_millis(50);
 const DEAD_CHECK: Duration = Duration::from_millis(300);
 /// How long the time owner has to stop at a step boundary after an interrupt.
 const STOP_GRACE: Duration = Duration::from_secs(3);
+/// How long the bridge has to end once the run has (it bounds its own wait on clients).
+const BRIDGE_GRACE: Duration = Duration::from_secs(2);
 
 /// The services the launcher reads or writes; they exist before any participant starts.
 struct Ports<T: Transport> {
@@ -92,7 +94,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
         let mut bridge = start_bridge()?;
         let parts = start().inspect_err(|_| {
             if let Some(b) = &mut bridge {
-                b.stop(Duration::from_secs(1));
+                let _ = b.stop(Duration::from_secs(1));
             }
         })?;
         let s = Supervisor {
@@ -345,11 +347,17 @@ impl<'a, T: Transport> Supervisor<'a, T> {
         if ctx.opts.announce {
             self.progress.finish(self.metrics.last, self.released);
         }
-        if let Some(b) = &mut self.bridge {
-            b.stop(Duration::from_secs(2));
+        // The run's time ends with its steps, not with its bridge.
+        let stepping = self.released.map_or(Duration::ZERO, |r| r.elapsed());
+        if let Some(b) = &mut self.bridge
+            && !b.stop(BRIDGE_GRACE)
+        {
+            tracing::warn!(
+                "the bridge did not end within {} s of being asked to: killed",
+                BRIDGE_GRACE.as_secs()
+            );
         }
         let steps_done = self.metrics.last.map_or(0, |(s, _)| s);
-        let stepping = self.released.map_or(Duration::ZERO, |r| r.elapsed());
         self.metrics
             .finish()
             .with_context(|| format!("finishing metrics in {}", ctx.dir.display()))?;

@@ -76,9 +76,8 @@ pub fn serve<T: Transport>(
     let view_roles: Vec<Role> = ports.views.iter().map(|(r, _)| *r).collect();
     let outbox = Outbox::open(&session, run, &view_roles)?;
     let (out_tx, out_rx) = mpsc::channel::<Out>();
-
-    std::thread::scope(|scope| -> anyhow::Result<()> {
-        let sender = scope.spawn(move || outbox.run(out_rx));
+    let sender = std::thread::spawn(move || outbox.run(out_rx));
+    let served = (|| -> anyhow::Result<()> {
         let mut bridge = Bridge::new(&mut ports, cfg, run, scene, effective, Outgoing(out_tx));
         while !stop.is_set() {
             bridge.take_summaries()?;
@@ -95,12 +94,43 @@ pub fn serve<T: Transport>(
                 break;
             }
         }
-        bridge.shut_down()?;
-        sender.join().map_err(|_| anyhow::anyhow!("the bridge's outbox thread panicked"))?;
-        Ok(())
-    })?;
-    let _ = session.close().wait();
-    Ok(())
+        bridge.shut_down()
+    })();
+    // What is left goes out, and the session closes, unless a client that does not read holds
+    // them up: zenoh would wait for its socket for seconds (10 s to close), and the launcher
+    // for the bridge. The process ends anyway, and the client's link with it.
+    if !finished_within(&sender, SHUTDOWN_WAIT) {
+        tracing::warn!(
+            "replies or state left unsent after {} ms: a client does not read",
+            SHUTDOWN_WAIT.as_millis()
+        );
+    } else if sender.join().is_err() {
+        anyhow::bail!("the bridge's outbox thread panicked");
+    }
+    let closing = session.clone();
+    let closer = std::thread::spawn(move || closing.close().wait());
+    if !finished_within(&closer, SHUTDOWN_WAIT) {
+        tracing::warn!(
+            "zenoh session not closed within {} ms: a client does not read",
+            SHUTDOWN_WAIT.as_millis()
+        );
+    }
+    served
+}
+
+/// How long the bridge, on its way out, waits for zenoh to send and to close.
+const SHUTDOWN_WAIT: Duration = Duration::from_millis(300);
+
+/// Whether thread `h` ended within `wait`.
+fn finished_within<R>(h: &std::thread::JoinHandle<R>, wait: Duration) -> bool {
+    let deadline = Instant::now() + wait;
+    while !h.is_finished() {
+        if Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    true
 }
 
 /// A queryable on `key` that hands every query to `tx`, as `incoming` makes it.
