@@ -18,11 +18,11 @@ use grains_protocol::scene::{Dimension, Model, Scene};
 /// Costs of this kind of machine [s].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Costs {
-    /// The hybrid's DEM, one thread, per grain-step.
+    /// The hybrid's DEM, two threads, per grain-step.
     pub dem_hybrid: f64,
     /// The pure DEM, two threads, per grain-step.
     pub dem_alone: f64,
-    /// The hybrid's MPM, one thread, per point and macro-step.
+    /// The hybrid's MPM, two threads, per point and macro-step.
     pub mpm: f64,
     /// Per macro-step: the coupler, the exchange and the waits that do not overlap.
     pub step: f64,
@@ -30,16 +30,17 @@ pub struct Costs {
 
 /// Measured on a 2-core machine of this project's kind by `grains bench chute --radii 0.5
 /// --cells 0.004 --depths 0.0167,0.05 --depth 0.15` (the periodic chute 0.2 × 0.15 m from a
-/// poured packing of 31,872 grains; the pure DEM on two threads, 20 DEM steps per macro-step;
-/// two hybrids on 4-mm cells with 1,750 and 2,580 grains and about 7,200 points, k = 22): the
-/// costs fitted to those runs, which the model then reproduces within 3%. The pure DEM's cost
-/// per grain-step on a settled packing is 4 times what a loose lattice gives (the figure
-/// before, 2.1e-8, came from one); the column of `grains bench hybrid` gives 9.8e-8.
+/// poured packing of 31,852 grains; the pure DEM on two threads, 20 DEM steps per macro-step;
+/// two hybrids on 4-mm cells with 1,750 and 2,580 grains and about 7,200 points, k = 22, two
+/// threads per solver): the costs fitted to those runs, which the model then reproduces within
+/// 15% (20.0 s, 1.8 s and 2.0 s measured; 19.9, 1.6 and 2.3 s modelled). A settled packing's
+/// DEM costs twice or more per grain-step what a loose lattice's does (its contacts are there
+/// from the start).
 pub const MEASURED: Costs = Costs {
-    dem_hybrid: 1.41e-7,
-    dem_alone: 8.8e-8,
-    mpm: 6.0e-7,
-    step: 4.7e-4,
+    dem_hybrid: 6.0e-8,
+    dem_alone: 4.5e-8,
+    mpm: 2.45e-7,
+    step: 2.54e-4,
 };
 
 /// The sizes a prediction needs.

@@ -4,7 +4,7 @@
 //! discrete layer (so the DEM fraction F left after hybridization) and the MPM cell H. Every
 //! grain size is poured once (vertical gravity, `grains pack`) and both models start from that
 //! packing: the pure DEM (the layer's body made `dem`, two threads) and the hybrid (fixed
-//! layered zones, one thread per solver, `coupling.substeps = "auto"`: both at their stable
+//! layered zones, two threads per solver, `coupling.substeps = "auto"`: both at their stable
 //! steps), every run over the same simulated window. Printed: wall time, speed-up, the
 //! measured F and the down-slope mass flux of each, the phase plots (hybrid faster or slower,
 //! per H) and the cost model of `launch/src/cost.rs` fitted to these runs, with its
@@ -266,6 +266,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                     format!("coupling.discrete_layer={:e}", f * args.depth),
                     format!("coupling.hybrid_band={:e}", args.band * h),
                     format!("coupling.dem_dt={dt:e}"),
+                    "run.threads=2".into(),
                 ]);
                 let label = format!("hybrid r={radius_mm}mm H={}mm depth={f}", h * 1e3);
                 let (sample, grains, points, flux) = one(args, &label, &o)?;
@@ -356,7 +357,7 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     let mut md = format!(
         "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
          from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
-         solvers on one each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
+         solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
          hybrid's. Flux: Σ m v_x / L at the end of the window. Coupled band: {} cell(s). Continuum: {}.\n\n\
          | run | r mm | H mm | N_i | F | MPM points | k | wall s | speed-up | DEM / MPM compute ms per macro-step | flux kg/(m s) | flux vs DEM |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
@@ -409,7 +410,7 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     if let Some(c) = costs {
         md.push_str(&format!(
             "\nCost model (`launch/src/cost.rs`, eqs. 21–23 in grains' terms) fitted to the runs of the finest grains: pure DEM {:.3e} s \
-             per grain-step (2 threads), the hybrid's DEM {:.3e} s per grain-step and its MPM {:.3e} s per point-step (1 thread \
+             per grain-step (2 threads), the hybrid's DEM {:.3e} s per grain-step and its MPM {:.3e} s per point-step (2 threads \
              each), {:.3e} s per macro-step beside them.\n\n| run | wall s | model s |\n|---|---:|---:|\n",
             c.dem_alone, c.dem_hybrid, c.mpm, c.step
         ));
