@@ -268,7 +268,7 @@ pub fn simple_shear(
             .push(SAMPLE + k as u64, x, ri, Grains::<D2>::mass_of(ri, mat.density), 0);
     }
     let (dt, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
-    let mut pipe = DemPipeline::<D2>::new(scene.threads as usize)?;
+    let mut pipe = DemPipeline::<D2>::new(super::THREADS)?;
     let rate_of = |i: f64| i * (pressure / mat.density).sqrt() / d;
     let plate_y = |st: &DemState<D2>| -> f64 {
         let k = st.grains.id.iter().position(|id| (PLATE..SAMPLE).contains(id)).expect("the plate");
