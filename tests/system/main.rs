@@ -7,6 +7,7 @@ mod oracle;
 mod steps;
 
 use grains_system_tests::*;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 const LONG: Duration = Duration::from_secs(300);
@@ -287,9 +288,19 @@ fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
     launcher.wait_for("refused grains-coupler", Duration::from_secs(10));
     assert!(launcher.stderr().contains("protocol version 999"), "{}", launcher.stderr());
 
-    // The run is still waiting; a good coupler attaches later and the run completes.
+    // The run is still waiting; a good coupler attaches later, started by the command the
+    // launcher printed, as printed (from another directory), and the run completes.
     std::thread::sleep(Duration::from_millis(300));
-    let mut good = Running::start(&coupler, &["--scene", scene, "--run-id", &run_id]);
+    let printed = launcher
+        .wait_for("--out-dir", Duration::from_secs(10))
+        .lines()
+        .skip_while(|l| !l.contains("waiting for an external coupler"))
+        .nth(1)
+        .expect("the line after the waiting message")
+        .trim()
+        .to_string();
+    assert!(printed.contains("--out-dir"), "{printed}");
+    let mut good = Running::start(Path::new("sh"), &["-c", &format!("cd / && exec {printed}")]);
     assert!(good.wait_exit(LONG).success(), "{}", good.stderr());
     let status = launcher.wait_exit(LONG);
     assert!(status.success(), "{}", launcher.stderr());

@@ -146,11 +146,19 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             }
         }
         for e in &ctx.opts.external {
+            let bin = super::participants::bin_dir().join(e.binary());
+            let dir = std::fs::canonicalize(ctx.dir).unwrap_or_else(|_| ctx.dir.to_path_buf());
             tracing::info!(
-                "waiting for an external {e} to attach; start it with:\n  {} --scene {} --run-id {}",
-                e.binary(),
-                ctx.scene_path.display(),
-                ctx.run_id
+                "waiting for an external {e} to attach; start it (or your own program, with the same arguments) with:\n  {}",
+                shell_words(&[
+                    bin.as_os_str(),
+                    "--scene".as_ref(),
+                    ctx.scene_path.as_os_str(),
+                    "--run-id".as_ref(),
+                    ctx.run_id.as_ref(),
+                    "--out-dir".as_ref(),
+                    dir.as_os_str()
+                ])
             );
         }
     }
@@ -384,5 +392,35 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             stepping,
         };
         Ok((outcome, roster_json(&self.roster, &*self.parts, ctx)))
+    }
+}
+
+/// `words` as one POSIX shell command line: every word that is not plainly safe is put in
+/// single quotes, so that the line works pasted as printed whatever the paths hold.
+fn shell_words(words: &[&std::ffi::OsStr]) -> String {
+    let word = |w: &std::ffi::OsStr| {
+        let w = w.to_string_lossy();
+        let safe = !w.is_empty() && w.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c));
+        if safe {
+            w.into_owned()
+        } else {
+            format!("'{}'", w.replace('\'', r"'\''"))
+        }
+    };
+    words.iter().map(|w| word(w)).collect::<Vec<_>>().join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shell_words;
+
+    #[test]
+    fn shell_words_quote_what_a_shell_would_split_or_expand() {
+        let w = |s: &'static str| std::ffi::OsStr::new(s);
+        assert_eq!(
+            shell_words(&[w("/a/grains-dem"), w("--run-id"), w("x-1")]),
+            "/a/grains-dem --run-id x-1"
+        );
+        assert_eq!(shell_words(&[w("/my runs/a$b"), w("it's"), w("")]), r"'/my runs/a$b' 'it'\''s' ''");
     }
 }

@@ -75,7 +75,7 @@ impl Gather {
     }
 }
 
-/// One step's summaries as a JSON object (keys documented in `protocol/README.md` §7).
+/// One step's summaries as a JSON object (keys documented in `protocol/README.md` §9).
 pub fn document(list: &[Summary], run_id: &str, scene: &str, steps: u64, paused: bool, steps_per_s: f64) -> Value {
     let step = list.first().map_or(0, |s| s.step);
     let time = list.first().map_or(0.0, |s| s.time);
