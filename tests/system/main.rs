@@ -263,6 +263,54 @@ fn broken_scene_files_exit_2_naming_file_and_field() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// An external participant that ends cleanly mid-run (here on SIGTERM: exit 130, its node
+/// closed, so no dead node) fails the run at once, named, instead of leaving the launcher and
+/// the solvers waiting for it for ever (they did before).
+#[test]
+fn an_external_participant_that_leaves_mid_run_fails_the_run() {
+    let _machine = machine();
+    let out = out_dir("external-left");
+    let scene = "tests/scenes/synthetic_small.toml";
+    let mut launcher = Running::grains(&[
+        "run",
+        scene,
+        "--out",
+        out.to_str().unwrap(),
+        "--external",
+        "coupler",
+        "--quiet",
+        "--set",
+        "run.steps=400000",
+    ]);
+    let err = launcher.wait_for("waiting for an external coupler", Duration::from_secs(60));
+    let run_id = run_id(&err);
+    let dir = run_dir(&err);
+    let scene_copy = dir.join("scene.toml");
+    let coupler = Running::start(
+        &bin("grains-coupler"),
+        &["--scene", scene_copy.to_str().unwrap(), "--run-id", &run_id],
+    );
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |m| m.lines().count()) < 20 {
+        assert!(Instant::now() < deadline, "the run did not step: {}", launcher.stderr());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // SAFETY: kill(2) on a child of ours, by pid.
+    assert_eq!(unsafe { libc::kill(coupler.child.id() as i32, libc::SIGTERM) }, 0);
+    let left = Instant::now();
+    let status = launcher.wait_exit(Duration::from_secs(30));
+    let took = left.elapsed();
+    assert_eq!(status.code(), Some(1), "{}", launcher.stderr());
+    assert!(
+        launcher.stderr().contains("the external grains-coupler left the run"),
+        "{}",
+        launcher.stderr()
+    );
+    assert!(took < Duration::from_secs(5), "the run failed {took:?} after the coupler left");
+    assert_eq!(summary(&dir)["status"], "failed");
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 #[test]
 fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
     let _machine = machine();

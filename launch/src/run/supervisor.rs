@@ -77,6 +77,8 @@ pub(super) struct Supervisor<'a, T: Transport> {
     /// A control command holds the run paused.
     paused: bool,
     last_dead_check: Instant,
+    /// The last peer check found fewer summary publishers than running participants.
+    short_of_publishers: bool,
 }
 
 impl<'a, T: Transport> Supervisor<'a, T> {
@@ -113,6 +115,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             stopped_at: None,
             paused: false,
             last_dead_check: Instant::now(),
+            short_of_publishers: false,
         };
         s.announce();
         Ok(s)
@@ -172,7 +175,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             self.progress.show(self.metrics.last, self.released);
             self.follow_acks()?;
             self.watch_bridge()?;
-            self.watch_participants();
+            self.watch_participants()?;
             if let Some(stop) = self.check_interrupt()?.or_else(|| self.failure.clone().map(Stop::Failure)) {
                 if let Stop::Failure(f) = &stop {
                     tracing::error!("{f}; stopping the other participants");
@@ -279,9 +282,9 @@ impl<'a, T: Transport> Supervisor<'a, T> {
         Ok(())
     }
 
-    /// Our children's exits, then dead nodes (external participants too): the first one that
-    /// did not end well is the run's failure.
-    fn watch_participants(&mut self) {
+    /// Our children's exits, then dead nodes (external participants too), then external
+    /// participants that left: the first one that did not end well is the run's failure.
+    fn watch_participants(&mut self) -> anyhow::Result<()> {
         let expected = self.interrupted.is_some();
         for exit in self.parts.poll_exits() {
             let pid = self.parts.pids().iter().find(|(r, _)| *r == exit.role).map_or(0, |(_, p)| *p);
@@ -302,7 +305,48 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             if !dead.is_empty() && self.failure.is_none() && !expected {
                 self.failure = Some(format!("participant {} died", dead.join(", ")));
             }
+            if self.failure.is_none() && !expected {
+                self.failure = self.external_left()?;
+            }
         }
+        Ok(())
+    }
+
+    /// Why the run fails if an external participant left it. A clean exit (on SIGTERM, or
+    /// after an error of its own) leaves no dead node and no exit status we could read: the
+    /// run would wait for it for ever. It does take its summary publisher along. So: fewer
+    /// summary publishers than admitted participants still running, at two checks in a row (a
+    /// child that exits in between is seen by its status), and the run neither complete nor
+    /// stopped once every summary sent is read.
+    fn external_left(&mut self) -> anyhow::Result<Option<String>> {
+        let ctx = self.ctx;
+        let externals: Vec<Role> = ctx
+            .opts
+            .external
+            .iter()
+            .copied()
+            .filter(|r| self.roster.ready.contains(r))
+            .collect();
+        if externals.is_empty() || self.released.is_none() {
+            return Ok(None);
+        }
+        let children = self.parts.pids().iter().filter(|(r, _)| !self.roster.exits.contains_key(r)).count();
+        let short = self.ports.summaries.publisher_count() < children + externals.len();
+        let before = std::mem::replace(&mut self.short_of_publishers, short);
+        if !(short && before) {
+            return Ok(None);
+        }
+        self.collect_summaries(Duration::ZERO)?;
+        if self.metrics.last.is_some_and(|(s, _)| s == ctx.scene.steps) || self.stopped_at.is_some() {
+            return Ok(None);
+        }
+        let names: Vec<&str> = externals.iter().map(|r| r.binary()).collect();
+        Ok(Some(format!(
+            "the external {} left the run after step {} of {}: it ended without a failure the run could see (a clean exit leaves no dead node)",
+            names.join(" or "),
+            self.metrics.last.map_or(0, |(s, _)| s),
+            ctx.scene.steps
+        )))
     }
 
     /// Ctrl-C / SIGTERM: the time owner stops at a step boundary; forced after

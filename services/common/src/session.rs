@@ -30,7 +30,7 @@ pub struct Session<'t, T: Transport> {
     hello: T::Publisher<Hello, ()>,
     welcome: T::Subscriber<Welcome, ()>,
     polls: std::cell::Cell<u32>,
-    /// When [`Session::check_between_steps`] last looked for dead peers.
+    /// When [`Session::watch_peers`] last looked for dead peers.
     last_dead_check: std::cell::Cell<Instant>,
 }
 
@@ -178,21 +178,15 @@ impl<'t, T: Transport> Session<'t, T> {
         Ok(())
     }
 
-    /// For a participant that steps without waiting on anyone (a solver alone in its run):
-    /// stop requests at every step, dead peers (the launcher among them) every few hundred
-    /// milliseconds, so that it never outlives its run.
-    pub fn check_between_steps(&self) -> anyhow::Result<()> {
+    /// Stop requests, and dead peers every few hundred milliseconds, whether this participant
+    /// waited or not: in a coupled run each peer's message can arrive within every poll, so
+    /// the empty polls of [`Session::check_alive`] may never come: a run whose launcher was
+    /// killed stepped on (seen once in the system test of the launcher's death), and an
+    /// external coupler took no notice of SIGTERM. Call it once per step (a solver alone in its run too: then it never outlives its run).
+    pub fn watch_peers(&self) -> anyhow::Result<()> {
         if self.stop.is_set() {
             bail!(Halt::Interrupted);
         }
-        self.watch_peers()
-    }
-
-    /// Dead peers every few hundred milliseconds, whether this participant waited or not: in a
-    /// coupled run each peer's message can arrive within every poll, so the empty polls of
-    /// [`Session::check_alive`] may never come, and a run whose launcher was killed stepped on
-    /// (seen once in the system test of the launcher's death). Call it once per step.
-    pub fn watch_peers(&self) -> anyhow::Result<()> {
         if self.last_dead_check.get().elapsed() >= POLL * DEAD_CHECK_EVERY {
             self.last_dead_check.set(Instant::now());
             self.check_dead("its next step")?;

@@ -560,7 +560,7 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
         if !go_on {
             break;
         }
-        session.check_between_steps()?;
+        session.watch_peers()?;
         crate::telemetry::set_step(Some(step));
         let window = StepWindow::of(scene, step);
         let t = Instant::now();
