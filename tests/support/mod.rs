@@ -175,8 +175,9 @@ pub fn summary(dir: &Path) -> serde_json::Value {
 
 /// The Python interpreter the test clients in `tests/python/` run with: `GRAINS_PYTHON` if
 /// set, else a venv the harness makes once, under the target directory, with the packages of
-/// `tests/python/requirements.txt` from PyPI (a fresh machine has Python but not them). A test
-/// that needs it fails at once, with the reason, when it cannot be had.
+/// `tests/python/requirements.txt` from PyPI (a fresh machine has Python but not them) and the
+/// example participants of `clients/python` (`grains_participants`; a `GRAINS_PYTHON` must
+/// have both). A test that needs it fails at once, with the reason, when it cannot be had.
 pub fn python() -> PathBuf {
     static PYTHON: std::sync::OnceLock<Result<PathBuf, String>> = std::sync::OnceLock::new();
     PYTHON
@@ -195,8 +196,11 @@ fn test_venv() -> Result<PathBuf, String> {
     let venv = target.join("test-python");
     let python = venv.join("bin/python");
     let requirements = repo().join("tests/python/requirements.txt");
+    let clients = repo().join("clients/python");
     let _lock = FileLock::take(&target.join("test-python.lock"))?;
     let wanted = std::fs::read_to_string(&requirements).map_err(|e| format!("{}: {e}", requirements.display()))?;
+    // The stamp names the editable install too, so that a venv made before it is remade.
+    let wanted = format!("{wanted}-e {}\n", clients.display());
     let stamp = venv.join("requirements.installed");
     if python.exists() && std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted) {
         return Ok(python);
@@ -225,6 +229,15 @@ fn test_venv() -> Result<PathBuf, String> {
             .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r"])
             .arg(&requirements),
         "pip install -r tests/python/requirements.txt",
+    )?;
+    // Editable: the venv runs the repository's `clients/python` as it is now, so a change to
+    // the example is tested without remaking the venv (the stamp follows requirements.txt
+    // only); a plain install would keep testing the copy made with the venv.
+    run(
+        Command::new(&python)
+            .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-e"])
+            .arg(&clients),
+        "pip install -e clients/python",
     )?;
     std::fs::write(&stamp, wanted).map_err(|e| format!("{}: {e}", stamp.display()))?;
     Ok(python)

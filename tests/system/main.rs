@@ -366,6 +366,83 @@ fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// protocol/README.md §8: the example external coupler in Python (`clients/python`, written
+/// from the README), started from the arguments the launcher prints, gives the physics
+/// columns of `metrics.csv` of the built-in coupler byte for byte: its own sums and checksum,
+/// and, through the velocities it sends, every solver's.
+#[test]
+fn a_python_coupler_gives_the_built_in_couplers_metrics_byte_for_byte() {
+    // The Python first: if it cannot be had, fail before any run starts.
+    let python = python();
+    let _machine = machine();
+    let out = out_dir("python-coupler");
+    let scene = "tests/scenes/hybrid_small_2d.toml";
+    let mut args = vec![
+        "run",
+        scene,
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--set",
+        "output.frames_every=0",
+        "--set",
+        "run.steps=200",
+    ];
+    let (status, err) = run_to_end(&args);
+    assert!(status.success(), "{err}");
+    let built_in = run_dir(&err);
+
+    args.extend(["--external", "coupler"]);
+    let mut launcher = Running::grains(&args);
+    let printed = launcher
+        .wait_for("--out-dir", Duration::from_secs(60))
+        .lines()
+        .skip_while(|l| !l.contains("waiting for an external coupler"))
+        .nth(1)
+        .expect("the line after the waiting message")
+        .trim()
+        .to_string();
+    // `<bin>/grains-coupler --scene … --run-id … --out-dir …`: the same arguments, as the shell
+    // reads them, to the Python coupler (from another directory).
+    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
+    let command = format!("cd / && exec '{}' -m grains_participants.coupler{arguments}", python.display());
+    let mut coupler = Running::start(Path::new("sh"), &["-c", &command]);
+    let status = coupler.wait_exit(LONG);
+    assert!(
+        status.success(),
+        "the Python coupler ended with {status}:\n{}\nthe launcher:\n{}",
+        coupler.stderr(),
+        launcher.stderr()
+    );
+    let status = launcher.wait_exit(LONG);
+    assert!(status.success(), "{}", launcher.stderr());
+    let external = run_dir(&launcher.stderr());
+    let parts = summary(&external)["participants"].clone();
+    assert!(
+        parts
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p["role"] == "coupler" && p["external"] == true),
+        "{parts}"
+    );
+
+    let read = |d: &Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    let (expected, got) = (read(&built_in), read(&external));
+    assert_eq!(expected.lines().count(), 201, "a header and 200 steps:\n{expected}");
+    let shared: u64 = column(&built_in, "coupler_items")[0].parse().unwrap();
+    assert!(shared > 0, "the coupler constrained no node");
+    if let Some((i, (e, g))) = expected.lines().zip(got.lines()).enumerate().find(|(_, (e, g))| e != g) {
+        panic!(
+            "metrics.csv differs from line {} on:\n{}\nbuilt-in: {e}\npython:   {g}",
+            i + 1,
+            expected.lines().next().unwrap_or_default()
+        );
+    }
+    assert_eq!(expected, got);
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 #[test]
 fn ctrl_c_stops_every_participant_cleanly_and_keeps_the_outputs() {
     let _machine = machine();
