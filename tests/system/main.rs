@@ -443,6 +443,130 @@ fn a_python_coupler_gives_the_built_in_couplers_metrics_byte_for_byte() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// protocol/README.md §8: the example external MPM in Python (`clients/python`,
+/// `grains_participants.mpm`: its own elastic APIC MPM, not the built-in one's numbers),
+/// started from the arguments the launcher prints, completes a hybrid run with the built-in
+/// DEM, coupler and oracle: every step's row is written, and two conservation laws that hold
+/// whatever the MPM's constitutive model hold to round-off:
+///
+/// - **mass**: the MPM's summary mass (`mpm_mass`, Σ w m over its points, §3.7) is the same
+///   in every row (fixed oracle: no point is created, deleted or reweighed);
+/// - **momentum along x**: the block of `hybrid_small_2d.toml`, moved 1 cm away from the
+///   left wall and launched at v0 = 0.1 m/s along x on its floor made frictionless, settles
+///   under gravity for 200 steps (2 ms; it moves 0.2 mm, never near the left wall or the
+///   domain's wall layers). Gravity and the frictionless floor act along y only, so nothing
+///   outside the two solvers pushes along x: grain contacts and stresses are internal, and
+///   with `grain_transfer = "flip"` the coupling moves momentum between the solvers without
+///   creating any (`flip_coupling_conserves_momentum_over_whole_steps`). So DEM + MPM
+///   momentum along x (`dem_px + mpm_px`) must stay M v0 (M = `dem_mass + mpm_mass`) in every
+///   row. It does only if the MPM's raster carries the same weighted mass and momentum its
+///   points lose or gain when it takes the coupler's velocities (§3.5, §3.6): a raster with
+///   unweighted masses, or an MPM that ignored the constrained velocities, makes momentum
+///   out of the velocity mismatch the coupler removes. Tolerance 1e-9 of M v0 (round-off is
+///   ~1e-16 here: 7e-17 kg m/s measured, 1.5e-16 with the built-in MPM). The settling
+///   block's grains and points disagree, so the coupling moves x momentum into or out of the
+///   MPM (1e-5 kg m/s measured, 1e5 times the tolerance): the check must see at least 100
+///   times the tolerance moved, or it would not test the coupling at all.
+#[test]
+fn an_external_python_mpm_completes_a_hybrid_run_keeping_mass_and_momentum() {
+    let python = python();
+    let _machine = machine();
+    let out = out_dir("python-mpm");
+    let args = [
+        "run",
+        "tests/scenes/hybrid_small_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--set",
+        "output.frames_every=0",
+        "--set",
+        "run.steps=200",
+        "--set",
+        "body.0.min=[0.01, 0.0]",
+        "--set",
+        "body.0.max=[0.034, 0.016]",
+        "--set",
+        "body.0.velocity=[0.1, 0.0]",
+        "--set",
+        "wall.0.friction=0.0",
+        "--external",
+        "mpm",
+    ];
+    let mut launcher = Running::grains(&args);
+    let printed = launcher
+        .wait_for("--out-dir", Duration::from_secs(60))
+        .lines()
+        .skip_while(|l| !l.contains("waiting for an external mpm"))
+        .nth(1)
+        .expect("the line after the waiting message")
+        .trim()
+        .to_string();
+    // `<bin>/grains-mpm --scene … --run-id … --out-dir …`: the same arguments, as the shell
+    // reads them, to the Python MPM (from another directory).
+    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
+    let command = format!("cd / && exec '{}' -m grains_participants.mpm{arguments}", python.display());
+    let mut mpm = Running::start(Path::new("sh"), &["-c", &command]);
+    let status = mpm.wait_exit(LONG);
+    assert!(
+        status.success(),
+        "the Python MPM ended with {status}:\n{}\nthe launcher:\n{}",
+        mpm.stderr(),
+        launcher.stderr()
+    );
+    let status = launcher.wait_exit(LONG);
+    assert!(status.success(), "{}", launcher.stderr());
+    let dir = run_dir(&launcher.stderr());
+    let s = summary(&dir);
+    assert_eq!(s["status"], "completed", "{s}");
+    assert!(
+        s["participants"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p["role"] == "mpm" && p["external"] == true),
+        "{s}"
+    );
+    let steps = 200;
+    let col = |name: &str| values(&dir, name);
+    assert_eq!(col("step").len(), steps, "one row per step");
+    assert!(
+        col("coupler_items").iter().all(|&n| n > 0.0),
+        "the coupler must constrain nodes every step"
+    );
+    assert!(col("mpm_items").iter().all(|&n| n > 0.0));
+
+    // Mass: the same every step.
+    let mpm_mass = col("mpm_mass");
+    let m0 = mpm_mass[0];
+    let mass_drift = mpm_mass.iter().map(|m| (m - m0).abs()).fold(0.0, f64::max);
+    eprintln!("MPM mass {m0} kg/m, largest drift {mass_drift:e}");
+    assert!(m0 > 0.0 && mass_drift <= 1e-14 * m0, "MPM mass drifts by {mass_drift:e} of {m0}");
+
+    // Momentum along x: DEM + MPM stays M v0.
+    let (dem_mass, dem_px, mpm_px) = (col("dem_mass"), col("dem_px"), col("mpm_px"));
+    let v0 = 0.1;
+    let scale = (dem_mass[0] + m0) * v0;
+    let (mut worst, mut moved) = (0.0_f64, 0.0_f64);
+    for n in 0..steps {
+        worst = worst.max((dem_px[n] + mpm_px[n] - (dem_mass[n] + mpm_mass[n]) * v0).abs());
+        moved = moved.max((mpm_px[n] - mpm_mass[n] * v0).abs());
+    }
+    eprintln!(
+        "M v0 = {scale:e} kg m/s; DEM + MPM x momentum off it by at most {worst:e}; \
+         x momentum the coupling moved into or out of the MPM: up to {moved:e}"
+    );
+    assert!(
+        worst <= 1e-9 * scale,
+        "DEM + MPM x momentum off M v0 by {worst:e} (M v0 = {scale:e})"
+    );
+    assert!(
+        moved >= 100.0 * 1e-9 * scale,
+        "the coupling moved only {moved:e} kg m/s: the momentum check would not test it"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 #[test]
 fn ctrl_c_stops_every_participant_cleanly_and_keeps_the_outputs() {
     let _machine = machine();

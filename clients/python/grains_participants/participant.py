@@ -43,6 +43,9 @@ SERVICES = {
     "grains/dem/raster": (1, 1, 2, False),
     "grains/mpm/raster": (1, 1, 2, False),
     "grains/coupler/velocities": (1, 2, 2, False),
+    "grains/oracle/zones": (1, 2, 2, False),
+    "grains/dem/view": (1, 1, 1, True),
+    "grains/mpm/view": (1, 1, 1, True),
 }
 
 NODE_NAMES = {

@@ -1,14 +1,14 @@
 """The messages of the grains protocol, its checksum and its scene hash.
 
 Implements protocol/README.md §3 (message layouts: `StepHeader`, `Hello`, `Welcome`,
-`StepBegin`, `RasterNode`, `NodeVelocity`, `Summary`, `Control`, `Ack`) and §4 (payload
-checksum, scene hash).
+`StepBegin`, `RasterNode`, `NodeVelocity`, `Summary`, `Control`, `Ack`, `ViewPoint`,
+`ZoneCell`) and §4 (payload checksum, scene hash).
 
 Each message is a `ctypes.Structure` with the fields of its table in §3, in order; the
 iceoryx2 bindings read its size and alignment from ctypes and its type name from the static
 `type_name()` (§1: `grains.<Name>.v1`, or `grains.Hello` / `grains.Welcome`). For bulk reads
 and writes in place the same layouts are also given as numpy dtypes (`RASTER_NODE`,
-`NODE_VELOCITY`).
+`NODE_VELOCITY`, `ZONE_CELL`, `VIEW_POINT`).
 """
 
 import ctypes
@@ -34,6 +34,9 @@ VERDICTS = {
 
 # StepBegin.flags (§3.4).
 STEP_STOP = 1
+
+# ZoneCell.zone (§3.9).
+ZONE_CONTINUUM, ZONE_HYBRID, ZONE_DISCRETE = 0, 1, 2
 
 # Control.command (§3.8) and Ack.status.
 PAUSE, RESUME, STOP, SNAPSHOT, SET = 1, 2, 3, 4, 5
@@ -160,11 +163,29 @@ class Ack(ctypes.Structure):
     ]
 
 
+@_named("grains.ViewPoint.v1")
+class ViewPoint(ctypes.Structure):
+    """§3.8a: DEM or MPM -> bridge, one item of a decimated view (64 bytes)."""
+
+    _fields_ = [("id", u64), ("position", f64 * 3), ("velocity", f64 * 3), ("size", f64)]
+
+
+@_named("grains.ZoneCell.v1")
+class ZoneCell(ctypes.Structure):
+    """§3.9: oracle -> DEM and MPM, the zone of one grid cell (24 bytes)."""
+
+    _fields_ = [("cell", u64), ("zone", u32), ("_pad", u32), ("distance", f64)]
+
+
 # The same layouts as numpy dtypes, for reading and writing slices in place.
 RASTER_NODE = np.dtype([("node", "<u8"), ("mass", "<f8"), ("momentum", "<f8", (3,))])
 NODE_VELOCITY = np.dtype([("node", "<u8"), ("velocity", "<f8", (3,))])
+ZONE_CELL = np.dtype([("cell", "<u8"), ("zone", "<u4"), ("_pad", "<u4"), ("distance", "<f8")])
+VIEW_POINT = np.dtype([("id", "<u8"), ("position", "<f8", (3,)), ("velocity", "<f8", (3,)), ("size", "<f8")])
 assert RASTER_NODE.itemsize == ctypes.sizeof(RasterNode) == 40
 assert NODE_VELOCITY.itemsize == ctypes.sizeof(NodeVelocity) == 32
+assert ZONE_CELL.itemsize == ctypes.sizeof(ZoneCell) == 24
+assert VIEW_POINT.itemsize == ctypes.sizeof(ViewPoint) == 64
 assert ctypes.sizeof(StepHeader) == 80 and ctypes.sizeof(Summary) == 104
 assert ctypes.sizeof(Hello) == ctypes.sizeof(Welcome) == 64
 assert ctypes.sizeof(StepBegin) == 8 and ctypes.alignment(StepBegin) == 4
