@@ -339,31 +339,55 @@ fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
     // The run is still waiting; a good coupler attaches later, started by the command the
     // launcher printed, as printed (from another directory), and the run completes.
     std::thread::sleep(Duration::from_millis(300));
-    let printed = launcher
-        .wait_for("--out-dir", Duration::from_secs(10))
-        .lines()
-        .skip_while(|l| !l.contains("waiting for an external coupler"))
-        .nth(1)
-        .expect("the line after the waiting message")
-        .trim()
-        .to_string();
-    assert!(printed.contains("--out-dir"), "{printed}");
+    let printed = printed_command(&mut launcher, "coupler");
     let mut good = Running::start(Path::new("sh"), &["-c", &format!("cd / && exec {printed}")]);
     assert!(good.wait_exit(LONG).success(), "{}", good.stderr());
     let status = launcher.wait_exit(LONG);
     assert!(status.success(), "{}", launcher.stderr());
     let dir = run_dir(&launcher.stderr());
     assert_eq!(metrics(&dir).len(), 60);
-    let parts = summary(&dir)["participants"].clone();
+    assert_external(&dir, "coupler");
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// The command `grains run --external <role>` printed for the missing participant: the line
+/// after its waiting message.
+fn printed_command(launcher: &mut Running, role: &str) -> String {
+    let printed = launcher
+        .wait_for("--out-dir", Duration::from_secs(60))
+        .lines()
+        .skip_while(|l| !l.contains(&format!("waiting for an external {role}")))
+        .nth(1)
+        .expect("the line after the waiting message")
+        .trim()
+        .to_string();
+    assert!(printed.contains("--out-dir"), "{printed}");
+    printed
+}
+
+/// Python `module` of `clients/python` started with the arguments of the printed command
+/// (`<bin>/grains-<role> --scene … --run-id … --out-dir …`), as the shell reads them, from
+/// another directory; waits for its success.
+fn run_python_external(python: &Path, module: &str, printed: &str, launcher: &Running) {
+    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
+    let command = format!("cd / && exec '{}' -m {module}{arguments}", python.display());
+    let mut external = Running::start(Path::new("sh"), &["-c", &command]);
+    let status = external.wait_exit(LONG);
     assert!(
-        parts
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|p| p["role"] == "coupler" && p["external"] == true),
+        status.success(),
+        "{module} ended with {status}:\n{}\nthe launcher:\n{}",
+        external.stderr(),
+        launcher.stderr()
+    );
+}
+
+/// The run's summary lists `role` as external.
+fn assert_external(dir: &Path, role: &str) {
+    let parts = summary(dir)["participants"].clone();
+    assert!(
+        parts.as_array().unwrap().iter().any(|p| p["role"] == role && p["external"] == true),
         "{parts}"
     );
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// protocol/README.md §8: the example external coupler in Python (`clients/python`, written
@@ -394,38 +418,12 @@ fn a_python_coupler_gives_the_built_in_couplers_metrics_byte_for_byte() {
 
     args.extend(["--external", "coupler"]);
     let mut launcher = Running::grains(&args);
-    let printed = launcher
-        .wait_for("--out-dir", Duration::from_secs(60))
-        .lines()
-        .skip_while(|l| !l.contains("waiting for an external coupler"))
-        .nth(1)
-        .expect("the line after the waiting message")
-        .trim()
-        .to_string();
-    // `<bin>/grains-coupler --scene … --run-id … --out-dir …`: the same arguments, as the shell
-    // reads them, to the Python coupler (from another directory).
-    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
-    let command = format!("cd / && exec '{}' -m grains_participants.coupler{arguments}", python.display());
-    let mut coupler = Running::start(Path::new("sh"), &["-c", &command]);
-    let status = coupler.wait_exit(LONG);
-    assert!(
-        status.success(),
-        "the Python coupler ended with {status}:\n{}\nthe launcher:\n{}",
-        coupler.stderr(),
-        launcher.stderr()
-    );
+    let printed = printed_command(&mut launcher, "coupler");
+    run_python_external(&python, "grains_participants.coupler", &printed, &launcher);
     let status = launcher.wait_exit(LONG);
     assert!(status.success(), "{}", launcher.stderr());
     let external = run_dir(&launcher.stderr());
-    let parts = summary(&external)["participants"].clone();
-    assert!(
-        parts
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|p| p["role"] == "coupler" && p["external"] == true),
-        "{parts}"
-    );
+    assert_external(&external, "coupler");
 
     let read = |d: &Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
     let (expected, got) = (read(&built_in), read(&external));
@@ -494,39 +492,14 @@ fn an_external_python_mpm_completes_a_hybrid_run_keeping_mass_and_momentum() {
         "mpm",
     ];
     let mut launcher = Running::grains(&args);
-    let printed = launcher
-        .wait_for("--out-dir", Duration::from_secs(60))
-        .lines()
-        .skip_while(|l| !l.contains("waiting for an external mpm"))
-        .nth(1)
-        .expect("the line after the waiting message")
-        .trim()
-        .to_string();
-    // `<bin>/grains-mpm --scene … --run-id … --out-dir …`: the same arguments, as the shell
-    // reads them, to the Python MPM (from another directory).
-    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
-    let command = format!("cd / && exec '{}' -m grains_participants.mpm{arguments}", python.display());
-    let mut mpm = Running::start(Path::new("sh"), &["-c", &command]);
-    let status = mpm.wait_exit(LONG);
-    assert!(
-        status.success(),
-        "the Python MPM ended with {status}:\n{}\nthe launcher:\n{}",
-        mpm.stderr(),
-        launcher.stderr()
-    );
+    let printed = printed_command(&mut launcher, "mpm");
+    run_python_external(&python, "grains_participants.mpm", &printed, &launcher);
     let status = launcher.wait_exit(LONG);
     assert!(status.success(), "{}", launcher.stderr());
     let dir = run_dir(&launcher.stderr());
     let s = summary(&dir);
     assert_eq!(s["status"], "completed", "{s}");
-    assert!(
-        s["participants"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|p| p["role"] == "mpm" && p["external"] == true),
-        "{s}"
-    );
+    assert_external(&dir, "mpm");
     let steps = 200;
     let col = |name: &str| values(&dir, name);
     assert_eq!(col("step").len(), steps, "one row per step");

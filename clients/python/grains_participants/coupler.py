@@ -18,7 +18,6 @@ What each part implements, in protocol/README.md:
   the coupler's summary of §3.7.
 """
 
-import argparse
 import ctypes
 import sys
 import time
@@ -26,8 +25,8 @@ import time
 import numpy as np
 
 from . import wire
-from .participant import POLL, Halt, Participant
-from .scene import Scene, SceneError
+from . import participant
+from .participant import POLL, Halt
 
 #: After acknowledging `stop`, the time owner keeps its ports this long (§3.8).
 ACK_LINGER = 0.3
@@ -290,42 +289,10 @@ class Coupler:
 
 
 def main(argv=None):
-    """§8: the arguments of `grains-coupler`; §7: exit 0 done, 1 failure, 2 bad input or
-    refused, 130 stopped by a signal."""
-    parser = argparse.ArgumentParser(
-        prog="python -m grains_participants.coupler",
-        description="An external grains coupler (protocol/README.md). Start it with the "
-        "arguments `grains run <scene> --external coupler` prints.",
+    """§8 and §7, as every participant (`participant.main`)."""
+    return participant.main(
+        wire.COUPLER, "grains_participants.coupler", "Coupler", lambda scene: None, lambda p, scene, _: Coupler(p, scene), argv
     )
-    parser.add_argument("--scene", required=True, help="the run's copy of the scene file")
-    parser.add_argument("--run-id", required=True, help="the run id the launcher printed")
-    parser.add_argument("--out-dir", help="the run's output directory (not used by a coupler)")
-    parser.add_argument(
-        "--connect-timeout", type=float, default=60.0, help="seconds per start-up wait; 0: no limit"
-    )
-    args = parser.parse_args(argv)
-    name = "grains_participants.coupler"
-    try:
-        scene = Scene(args.scene)
-    except (OSError, SceneError) as e:
-        print(f"{name}: error: {e}", file=sys.stderr)
-        return 2
-    participant = None
-    try:
-        participant = Participant(
-            wire.COUPLER, args.run_id, wire.scene_hash(scene.data), args.connect_timeout
-        )
-        Coupler(participant, scene).run()
-        return 0
-    except Halt as e:
-        print(f"{name}: error: {e}", file=sys.stderr)
-        return e.code
-    except Exception as e:  # an iceoryx2 failure, a bug: exit 1 with the reason
-        print(f"{name}: error: {type(e).__name__}: {e}", file=sys.stderr)
-        return 1
-    finally:
-        if participant is not None:
-            participant.close()
 
 
 if __name__ == "__main__":

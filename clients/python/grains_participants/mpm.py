@@ -34,7 +34,6 @@ synthetic test scenes, adaptive oracles (`oracle.kind = "surface"` or `"layered"
 segment and drum walls.
 """
 
-import argparse
 import ctypes
 import math
 import sys
@@ -44,8 +43,9 @@ import tomllib
 import numpy as np
 
 from . import wire
-from .participant import Halt, Participant
-from .scene import Scene, SceneError
+from . import participant
+from .participant import Halt
+from .scene import SceneError
 
 #: The outer node layers of every non-periodic domain face are its wall (as the built-in MPM).
 DOMAIN_WALL_NODES = 3
@@ -630,41 +630,8 @@ class Mpm:
 
 
 def main(argv=None):
-    """§8: the arguments of `grains-mpm`; §7: exit 0 done, 1 failure, 2 bad input or
-    refused, 130 stopped by a signal."""
-    parser = argparse.ArgumentParser(
-        prog="python -m grains_participants.mpm",
-        description="An external grains MPM (protocol/README.md). Start it with the arguments "
-        "`grains run <scene> --external mpm` prints.",
-    )
-    parser.add_argument("--scene", required=True, help="the run's copy of the scene file")
-    parser.add_argument("--run-id", required=True, help="the run id the launcher printed")
-    parser.add_argument("--out-dir", help="the run's output directory (this example writes nothing there)")
-    parser.add_argument(
-        "--connect-timeout", type=float, default=60.0, help="seconds per start-up wait; 0: no limit"
-    )
-    args = parser.parse_args(argv)
-    name = "grains_participants.mpm"
-    try:
-        scene = Scene(args.scene)
-        ms = MpmScene(scene)
-    except (OSError, SceneError, KeyError, ValueError, TypeError) as e:
-        print(f"{name}: error: {args.scene}: {type(e).__name__}: {e}" if not isinstance(e, SceneError) else f"{name}: error: {e}", file=sys.stderr)
-        return 2
-    participant = None
-    try:
-        participant = Participant(wire.MPM, args.run_id, wire.scene_hash(scene.data), args.connect_timeout)
-        Mpm(participant, scene, ms).run()
-        return 0
-    except Halt as e:
-        print(f"{name}: error: {e}", file=sys.stderr)
-        return e.code
-    except Exception as e:  # an iceoryx2 failure, a bug: exit 1 with the reason
-        print(f"{name}: error: {type(e).__name__}: {e}", file=sys.stderr)
-        return 1
-    finally:
-        if participant is not None:
-            participant.close()
+    """§8 and §7, as every participant (`participant.main`)."""
+    return participant.main(wire.MPM, "grains_participants.mpm", "MPM", MpmScene, Mpm, argv)
 
 
 if __name__ == "__main__":

@@ -12,10 +12,12 @@
   received headers checked).
 """
 
+import argparse
 import ctypes
 import faulthandler
 import os
 import signal
+import sys
 import time
 
 import iceoryx2 as iox2
@@ -402,3 +404,51 @@ class Participant:
                     f"{service}: step {step}: payload checksum {actual:#018x} does not match "
                     f"the header's {h.checksum:#018x} ({n} elements)"
                 )
+
+
+def main(role, name, what, prepare, make, argv=None):
+    """§8: the arguments every participant binary takes; §7: exit 0 done, 1 failure, 2 bad
+    input or refused, 130 stopped by a signal.
+
+    `prepare(scene)` reads what the participant needs of the scene (an error there is bad
+    input, exit 2); `make(participant, scene, prepared)` returns the object whose `run()`
+    takes part in the run.
+    """
+    from .scene import Scene, SceneError
+
+    parser = argparse.ArgumentParser(
+        prog=f"python -m {name}",
+        description=f"An external grains {what} (protocol/README.md). Start it with the arguments "
+        f"`grains run <scene> --external {what.lower()}` prints.",
+    )
+    parser.add_argument("--scene", required=True, help="the run's copy of the scene file")
+    parser.add_argument("--run-id", required=True, help="the run id the launcher printed")
+    parser.add_argument("--out-dir", help="the run's output directory (these examples write nothing there)")
+    parser.add_argument(
+        "--connect-timeout", type=float, default=60.0, help="seconds per start-up wait; 0: no limit"
+    )
+    args = parser.parse_args(argv)
+    try:
+        scene = Scene(args.scene)
+        prepared = prepare(scene)
+    except SceneError as e:
+        print(f"{name}: error: {e}", file=sys.stderr)
+        return 2
+    except (OSError, KeyError, ValueError, TypeError) as e:
+        print(f"{name}: error: {args.scene}: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
+    participant = None
+    try:
+        participant = Participant(role, args.run_id, wire.scene_hash(scene.data), args.connect_timeout)
+        make(participant, scene, prepared).run()
+        return 0
+    except Halt as e:
+        print(f"{name}: error: {e}", file=sys.stderr)
+        return e.code
+    except Exception as e:  # an iceoryx2 failure, a bug: exit 1 with the reason
+        print(f"{name}: error: {type(e).__name__}: {e}", file=sys.stderr)
+        return 1
+    finally:
+        if participant is not None:
+            participant.close()
+
