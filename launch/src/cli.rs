@@ -18,6 +18,9 @@ pub struct Cli {
 pub enum Cmd {
     /// Run a scene: start its participants, show progress, write out/<scene>/<run-id>/.
     Run(RunArgs),
+    /// Continue a run that stopped (killed, interrupted, failed) from its last complete
+    /// checkpoint, in its own directory: physics and frames as if it had never stopped.
+    Resume(ResumeArgs),
     /// Live table of a run's summaries, from its bridge (here or on another machine).
     Monitor {
         /// Run id (see `grains runs`).
@@ -89,19 +92,64 @@ pub struct RunArgs {
     pub bridge: bool,
     #[command(flatten)]
     pub bridge_args: grains_bridge::config::BridgeArgs,
+    /// Checkpoint every N macro-steps into <run dir>/checkpoints/ (`grains resume` continues
+    /// from the last); the same as `--set output.checkpoint_every=N`.
+    #[arg(long, value_name = "N")]
+    pub checkpoint_every: Option<u64>,
 }
 
 impl RunArgs {
     pub fn options(self) -> grains_launch::run::RunOptions {
+        let mut overrides = self.overrides;
+        if let Some(n) = self.checkpoint_every {
+            overrides.push(format!("output.checkpoint_every={n}"));
+        }
         grains_launch::run::RunOptions {
             scene_path: self.scene,
             transport: self.transport,
             external: self.external,
             out_root: self.out,
             progress: !self.quiet,
-            overrides: self.overrides,
+            overrides,
             announce: true,
             bridge: self.bridge.then_some(self.bridge_args),
+            resume: None,
+        }
+    }
+}
+
+#[derive(clap::Args)]
+pub struct ResumeArgs {
+    /// The run's directory (out/<scene>/<run id>).
+    pub run_dir: PathBuf,
+    /// How participants run and talk.
+    #[arg(long, value_enum, default_value_t = TransportKind::Ipc)]
+    pub transport: TransportKind,
+    /// Start everything but this participant and wait for it to attach (repeatable).
+    #[arg(long, value_parser = parse_role)]
+    pub external: Vec<Role>,
+    /// No live progress line.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Open the run to remote clients over zenoh (grains monitor, grains steer; see README).
+    #[arg(long)]
+    pub bridge: bool,
+    #[command(flatten)]
+    pub bridge_args: grains_bridge::config::BridgeArgs,
+}
+
+impl ResumeArgs {
+    pub fn options(self) -> grains_launch::run::RunOptions {
+        grains_launch::run::RunOptions {
+            scene_path: self.run_dir.join("scene.toml"),
+            transport: self.transport,
+            external: self.external,
+            out_root: PathBuf::new(),
+            progress: !self.quiet,
+            overrides: Vec::new(),
+            announce: true,
+            bridge: self.bridge.then_some(self.bridge_args),
+            resume: Some(self.run_dir),
         }
     }
 }

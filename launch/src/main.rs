@@ -9,16 +9,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     grains_service::telemetry::init("grains");
     let result = match cli.command {
-        Cmd::Run(args) => run::run(&args.options()).map(|o| {
-            tracing::info!(
-                "run {} {}: {} (output in {})",
-                o.run_id,
-                o.status.as_str(),
-                o.message,
-                o.dir.display()
-            );
-            o.status.exit_code()
-        }),
+        Cmd::Run(args) => finish_run(run::run(&args.options())),
+        Cmd::Resume(args) => finish_run(run::run(&args.options())),
         Cmd::Monitor { run, rows, remote } => remote
             .endpoint()
             .and_then(|ep| grains_bridge::client::monitor(&ep, &run, rows, &mut std::io::stdout().lock()))
@@ -50,4 +42,18 @@ fn main() -> ExitCode {
             ExitCode::from(grains_launch::exit_code(&err))
         }
     }
+}
+
+/// How a run (or a resumed one) ended, said once; its exit code.
+fn finish_run(outcome: anyhow::Result<run::RunOutcome>) -> anyhow::Result<u8> {
+    outcome.map(|o| {
+        tracing::info!(
+            "run {} {}: {} (output in {})",
+            o.run_id,
+            o.status.as_str(),
+            o.message,
+            o.dir.display()
+        );
+        o.status.exit_code()
+    })
 }

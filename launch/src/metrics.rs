@@ -66,25 +66,66 @@ pub struct MetricsWriter {
     part: PathBuf,
     last_flush: Instant,
     started: Instant,
+    /// `wall_s` of the run before it was resumed (0 for a fresh run).
+    wall_before: f64,
+    /// Bytes in the file so far.
+    bytes: u64,
     /// Last complete row: (step, simulated time at its end).
     pub last: Option<(u64, f64)>,
+    /// Steps whose rows close a checkpoint ([`MetricsWriter::checkpoint_at`]), written and
+    /// not yet taken: (step, time, the file's length after the row, its `wall_s`).
+    pub checkpoint_rows: Vec<(u64, f64, u64, f64)>,
+    /// `output.checkpoint_every` and `run.steps` of the run (0: no checkpoints).
+    checkpoints: (u64, u64),
 }
 
 impl MetricsWriter {
     pub fn create(dir: &Path, roles: &[Role]) -> std::io::Result<Self> {
         let part = dir.join("metrics.csv.part");
         let mut out = BufWriter::new(File::create(&part)?);
-        writeln!(out, "{}", header(roles).join(","))?;
-        Ok(MetricsWriter {
+        let head = format!("{}\n", header(roles).join(","));
+        out.write_all(head.as_bytes())?;
+        Ok(Self::writer(roles, out, part, 1, head.len() as u64))
+    }
+
+    /// Appends to the `metrics.csv.part` of a run resumed after `step` (at `time`, `wall_s`),
+    /// already cut back to its rows up to that step.
+    pub fn resume(dir: &Path, roles: &[Role], step: u64, time: f64, wall_s: f64) -> std::io::Result<Self> {
+        let part = dir.join("metrics.csv.part");
+        let file = std::fs::OpenOptions::new().append(true).open(&part)?;
+        let bytes = file.metadata()?.len();
+        let mut m = Self::writer(roles, BufWriter::new(file), part, step + 1, bytes);
+        m.last = Some((step, time));
+        m.wall_before = wall_s;
+        Ok(m)
+    }
+
+    fn writer(roles: &[Role], out: BufWriter<File>, part: PathBuf, next_step: u64, bytes: u64) -> Self {
+        MetricsWriter {
             roles: roles.to_vec(),
             pending: BTreeMap::new(),
-            next_step: 1,
+            next_step,
             out,
             part,
             last_flush: Instant::now(),
             started: Instant::now(),
+            wall_before: 0.0,
+            bytes,
             last: None,
-        })
+            checkpoint_rows: Vec::new(),
+            checkpoints: (0, 0),
+        }
+    }
+
+    /// The rows of the run's checkpoint steps are listed in `checkpoint_rows`.
+    pub fn checkpoint_at(&mut self, every: u64, steps: u64) {
+        self.checkpoints = (every, steps);
+    }
+
+    /// Every row written so far on disk, synced (before a checkpoint's manifest names them).
+    pub fn sync(&mut self) -> std::io::Result<()> {
+        self.out.flush()?;
+        self.out.get_ref().sync_data()
     }
 
     /// Restarts the wall clock of the `wall_s` column (at the start of step 1).
@@ -131,12 +172,18 @@ impl MetricsWriter {
                 s.n_items, s.n_nodes, s.mass, s.momentum[0], s.momentum[1], s.momentum[2], s.kinetic_energy, s.checksum
             ));
         }
-        line.push_str(&format!(",{:.6}", self.started.elapsed().as_secs_f64()));
+        let wall = self.wall_before + self.started.elapsed().as_secs_f64();
+        line.push_str(&format!(",{wall:.6}"));
         for s in row.iter().flatten() {
             line.push_str(&format!(",{:.4},{:.4}", s.compute_ns as f64 * 1e-6, s.wait_ns as f64 * 1e-6));
         }
-        writeln!(self.out, "{line}")?;
+        line.push('\n');
+        self.out.write_all(line.as_bytes())?;
+        self.bytes += line.len() as u64;
         self.last = Some((first.step, first.time));
+        if grains_service::checkpoint::due_at(self.checkpoints.0, self.checkpoints.1, first.step) {
+            self.checkpoint_rows.push((first.step, first.time, self.bytes, wall));
+        }
         Ok(())
     }
 

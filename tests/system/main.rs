@@ -4,6 +4,7 @@
 mod bridge;
 mod calibrate;
 mod oracle;
+mod restart;
 mod steps;
 
 use grains_system_tests::*;
@@ -763,10 +764,10 @@ impl Hybrid {
         edit(&mut s);
         // The oracle's field, as the participants receive it.
         let zones = grains_service::zones::ZoneField::layered(&s);
-        let dem =
-            grains_dem_service::solver::DemSolver::new(&s, grains_dem_service::setup::build_state(&s, &zones).unwrap(), None).unwrap();
+        let dem = grains_dem_service::solver::DemSolver::new(&s, grains_dem_service::setup::build_state(&s, &zones).unwrap(), None, None)
+            .unwrap();
         let (points, params) = grains_mpm_service::setup::build(&s, &zones).unwrap();
-        let mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None).unwrap();
+        let mpm = grains_mpm_service::solver::MpmSolver::new(&s, points, params, None, None).unwrap();
         Hybrid { scene: s, dem, mpm }
     }
 

@@ -72,6 +72,7 @@ fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64) -> anyhow::Resul
         for (k, transport) in [TransportKind::Inproc, TransportKind::Ipc].into_iter().enumerate() {
             let opts = RunOptions {
                 bridge: None,
+                resume: None,
                 scene_path: scene.clone(),
                 transport,
                 external: vec![],

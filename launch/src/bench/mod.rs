@@ -33,6 +33,7 @@ pub(crate) fn run_resolved(
     tracing::info!("bench: {label}");
     let outcome = run(&RunOptions {
         bridge: None,
+        resume: None,
         scene_path: resolved,
         transport: TransportKind::Ipc,
         external: Vec::new(),

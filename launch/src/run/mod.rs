@@ -13,6 +13,7 @@ pub mod bridge;
 pub mod outputs;
 pub mod participants;
 mod progress;
+pub mod resume;
 pub mod steps;
 mod supervisor;
 
@@ -53,6 +54,9 @@ pub struct RunOptions {
     pub announce: bool,
     /// Start the zenoh bridge with these flags.
     pub bridge: Option<BridgeArgs>,
+    /// Continue the run in this directory from its last complete checkpoint (`grains resume`):
+    /// its own copy of the scene is the scene; `scene_path` and `overrides` are not read.
+    pub resume: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -192,14 +196,25 @@ pub fn new_run_id() -> String {
     format!("{}-{noise:04x}", crate::clock::Utc::from_unix(now.as_secs()).compact())
 }
 
-/// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs.
+/// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs; or, with
+/// [`RunOptions::resume`], continues a run from its last complete checkpoint.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
-    let (scene, text, chosen) = steps::load(&opts.scene_path, &opts.overrides)?;
-    if let Some(c) = chosen
-        && opts.announce
-    {
-        tracing::info!("{c}");
-    }
+    let (scene, text, resume) = match &opts.resume {
+        None => {
+            let (scene, text, chosen) = steps::load(&opts.scene_path, &opts.overrides)?;
+            if let Some(c) = chosen
+                && opts.announce
+            {
+                tracing::info!("{c}");
+            }
+            (scene, text, None)
+        }
+        Some(dir) => {
+            let (scene, text, _) = steps::load(&dir.join("scene.toml"), &[])?;
+            let resume = resume::prepare(dir, &scene)?;
+            (scene, text, Some(resume))
+        }
+    };
     let roles = scene.participants();
     if scene.synthetic.is_none() {
         check_physics(&scene)?;
@@ -229,13 +244,19 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             tracing::info!("removed {} files left by run {dead}, whose processes are all gone", files.len());
         }
     }
+    // A resumed run has a run id of its own (its transport is new), in the old directory.
     let run_id = new_run_id();
-    let dir = opts.out_root.join(&scene.name).join(&run_id);
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
-    // The exact scene of the run (overrides applied, file paths made absolute) sits beside its
-    // outputs; every participant reads this copy.
+    let dir = match &resume {
+        Some(r) => r.run_dir.clone(),
+        None => opts.out_root.join(&scene.name).join(&run_id),
+    };
     let scene_copy = dir.join("scene.toml");
-    write_atomic(&scene_copy, text.as_bytes()).with_context(|| format!("writing {}", scene_copy.display()))?;
+    if resume.is_none() {
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating the output directory {}", dir.display()))?;
+        // The exact scene of the run (overrides applied, file paths made absolute) sits beside
+        // its outputs; every participant reads this copy.
+        write_atomic(&scene_copy, text.as_bytes()).with_context(|| format!("writing {}", scene_copy.display()))?;
+    }
     let scene_path = std::fs::canonicalize(&scene_copy).with_context(|| format!("resolving {}", scene_copy.display()))?;
 
     let started = SystemTime::now();
@@ -246,7 +267,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         run_id: &run_id,
         dir: &dir,
         opts,
+        resume: resume.as_ref(),
     };
+    let resume_dir = resume.as_ref().map(|r| r.checkpoint.as_path());
     let (report, participants) = match opts.transport {
         TransportKind::Ipc => {
             let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary(), StopFlag::with_signals().as_cancel())?;
@@ -257,7 +280,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                 None => Ok(None),
             };
             let result = Supervisor::start(&transport, &ctx, bridge, || {
-                Ok(Box::new(Processes::spawn(&spawned, &scene_path, &run_id, &dir, external_timeout)?) as Box<dyn Participants>)
+                Ok(Box::new(Processes::spawn(
+                    &spawned,
+                    &scene_path,
+                    &run_id,
+                    &dir,
+                    external_timeout,
+                    resume_dir,
+                )?) as Box<dyn Participants>)
             })
             .and_then(Supervisor::run);
             drop(transport);
@@ -271,7 +301,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                 None => Ok(None),
             };
             Supervisor::start(&bus, &ctx, bridge, || {
-                Ok(Box::new(Threads::spawn(&roles, &scene, &run_id, &dir, &bus)?) as Box<dyn Participants>)
+                Ok(Box::new(Threads::spawn(&roles, &scene, &run_id, &dir, &bus, resume_dir)?) as Box<dyn Participants>)
             })?
             .run()?
         }
@@ -304,4 +334,6 @@ struct RunCtx<'a> {
     run_id: &'a str,
     dir: &'a Path,
     opts: &'a RunOptions,
+    /// What a resumed run continues from.
+    resume: Option<&'a resume::Resumed>,
 }

@@ -24,6 +24,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 /// `summary.json`: the run, how it ended, every participant.
 pub(super) fn write_summary(ctx: &RunCtx, r: &RunOutcome, participants: serde_json::Value, started: SystemTime) -> anyhow::Result<()> {
     let wall = r.stepping.as_secs_f64();
+    let resumed_after = ctx.resume.map(|r| r.manifest.step);
+    let steps_here = r.steps_done - resumed_after.unwrap_or(0).min(r.steps_done);
     let json = serde_json::json!({
         "run_id": r.run_id,
         "scene": ctx.scene_path.display().to_string(),
@@ -37,7 +39,9 @@ pub(super) fn write_summary(ctx: &RunCtx, r: &RunOutcome, participants: serde_js
         "steps_completed": r.steps_done,
         "simulated_time": r.steps_done as f64 * ctx.scene.dt,
         "wall_time_s": wall,
-        "steps_per_second": if wall > 0.0 { r.steps_done as f64 / wall } else { 0.0 },
+        "steps_per_second": if wall > 0.0 { steps_here as f64 / wall } else { 0.0 },
+        "resumed_after_step": resumed_after,
+        "checkpoint_every": ctx.scene.output.checkpoint_every,
         "started_unix_s": started.duration_since(SystemTime::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0),
         "participants": participants,
         "outputs": { "metrics": "metrics.csv" },

@@ -85,7 +85,15 @@ pub(crate) fn child_command(bin: &Path) -> Command {
 
 impl Processes {
     /// Starts `roles` as processes of their own ([`child_command`]).
-    pub fn spawn(roles: &[Role], scene_path: &Path, run_id: &str, out_dir: &Path, connect_timeout: f64) -> anyhow::Result<Self> {
+    /// `resume`: the checkpoint directory of a resumed run.
+    pub fn spawn(
+        roles: &[Role],
+        scene_path: &Path,
+        run_id: &str,
+        out_dir: &Path,
+        connect_timeout: f64,
+        resume: Option<&Path>,
+    ) -> anyhow::Result<Self> {
         let dir = bin_dir();
         let mut children = Vec::new();
         for &role in roles {
@@ -99,6 +107,9 @@ impl Processes {
                 .arg(connect_timeout.to_string())
                 .arg("--out-dir")
                 .arg(out_dir);
+            if let Some(dir) = resume {
+                cmd.arg("--resume").arg(dir);
+            }
             let child = cmd.spawn().map_err(|e| anyhow::anyhow!("cannot start {}: {e}", bin.display()))?;
             let pid = child.id();
             children.push((role, Some(child), pid));
@@ -164,7 +175,8 @@ pub struct Threads {
 
 impl Threads {
     /// Runs `roles` as threads of this process over the in-process transport `bus`.
-    pub fn spawn(roles: &[Role], scene: &Scene, run_id: &str, out_dir: &Path, bus: &InProc) -> anyhow::Result<Self> {
+    pub fn spawn(roles: &[Role], scene: &Scene, run_id: &str, out_dir: &Path, bus: &InProc, resume: Option<&Path>) -> anyhow::Result<Self> {
+        let resume = resume.map(grains_service::checkpoint::Resume::open).transpose()?;
         let mut threads = Vec::new();
         for &role in roles {
             let stop = StopFlag::manual();
@@ -175,6 +187,7 @@ impl Threads {
                 protocol_version: grains_protocol::PROTOCOL_VERSION,
                 checksums: scene.synthetic.as_ref().is_none_or(|s| s.checksum),
                 out_dir: Some(out_dir.to_path_buf()),
+                resume: resume.clone(),
             };
             let (scene, bus) = (scene.clone(), bus.clone());
             let handle = std::thread::Builder::new().name(role.binary().into()).spawn(move || {

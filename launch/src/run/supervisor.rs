@@ -13,6 +13,7 @@ use anyhow::Context;
 use grains_protocol::names;
 use grains_protocol::wire::{Ack, AckStatus, Command, Control, Hello, StepHeader, Summary, Verdict, Welcome};
 use grains_protocol::{HELLO_MAGIC, PROTOCOL_VERSION, Role, run_id_bytes};
+use grains_service::checkpoint;
 use grains_service::signals::StopFlag;
 use grains_transport::{Publisher, Subscriber, Transport};
 use std::time::{Duration, Instant};
@@ -91,7 +92,12 @@ impl<'a, T: Transport> Supervisor<'a, T> {
         start: impl FnOnce() -> anyhow::Result<Box<dyn Participants>>,
     ) -> anyhow::Result<Self> {
         let ports = Ports::open(transport)?;
-        let metrics = MetricsWriter::create(ctx.dir, ctx.roles).with_context(|| format!("creating metrics in {}", ctx.dir.display()))?;
+        let mut metrics = match ctx.resume {
+            None => MetricsWriter::create(ctx.dir, ctx.roles),
+            Some(r) => MetricsWriter::resume(ctx.dir, ctx.roles, r.manifest.step, r.manifest.time, r.manifest.wall_s),
+        }
+        .with_context(|| format!("opening metrics in {}", ctx.dir.display()))?;
+        metrics.checkpoint_at(ctx.scene.output.checkpoint_every, ctx.scene.steps);
         let signals = StopFlag::with_signals();
         let mut bridge = start_bridge()?;
         let parts = start().inspect_err(|_| {
@@ -151,17 +157,24 @@ impl<'a, T: Transport> Supervisor<'a, T> {
         for e in &ctx.opts.external {
             let bin = super::participants::bin_dir().join(e.binary());
             let dir = std::fs::canonicalize(ctx.dir).unwrap_or_else(|_| ctx.dir.to_path_buf());
+            let mut words = vec![
+                bin.as_os_str(),
+                "--scene".as_ref(),
+                ctx.scene_path.as_os_str(),
+                "--run-id".as_ref(),
+                ctx.run_id.as_ref(),
+                "--out-dir".as_ref(),
+                dir.as_os_str(),
+            ];
+            let resume = ctx
+                .resume
+                .map(|r| std::fs::canonicalize(&r.checkpoint).unwrap_or_else(|_| r.checkpoint.clone()));
+            if let Some(r) = &resume {
+                words.extend(["--resume".as_ref(), r.as_os_str()]);
+            }
             tracing::info!(
                 "waiting for an external {e} to attach; start it (or your own program, with the same arguments) with:\n  {}",
-                shell_words(&[
-                    bin.as_os_str(),
-                    "--scene".as_ref(),
-                    ctx.scene_path.as_os_str(),
-                    "--run-id".as_ref(),
-                    ctx.run_id.as_ref(),
-                    "--out-dir".as_ref(),
-                    dir.as_os_str()
-                ])
+                shell_words(&words)
             );
         }
     }
@@ -172,6 +185,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
         loop {
             self.admit()?;
             self.collect_summaries(WAIT)?;
+            self.record_checkpoints()?;
             self.progress.show(self.metrics.last, self.released);
             self.follow_acks()?;
             self.watch_bridge()?;
@@ -235,6 +249,51 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             if let Err(e) = self.metrics.add(&s) {
                 self.failure.get_or_insert(e);
             }
+        }
+        Ok(())
+    }
+
+    /// Every checkpoint whose step's row is written: each participant wrote its file before
+    /// its summary, so once the row is synced the checkpoint is complete; its manifest says
+    /// so. Older checkpoints beyond [`super::resume::KEEP`] go.
+    fn record_checkpoints(&mut self) -> anyhow::Result<()> {
+        if self.metrics.checkpoint_rows.is_empty() {
+            return Ok(());
+        }
+        let ctx = self.ctx;
+        self.metrics
+            .sync()
+            .with_context(|| format!("syncing metrics in {}", ctx.dir.display()))?;
+        for (step, time, bytes, wall_s) in std::mem::take(&mut self.metrics.checkpoint_rows) {
+            let dir = checkpoint::dir(ctx.dir, step);
+            let missing: Vec<&str> = ctx
+                .roles
+                .iter()
+                .filter(|r| !checkpoint::file(&dir, **r).exists())
+                .map(|r| r.binary())
+                .collect();
+            if !missing.is_empty() {
+                tracing::warn!(
+                    "the checkpoint after step {step} is incomplete: no file from {} in {}; the run goes on, this checkpoint cannot be resumed",
+                    missing.join(", "),
+                    dir.display()
+                );
+                continue;
+            }
+            let manifest = checkpoint::Manifest {
+                format: checkpoint::FORMAT,
+                step,
+                time,
+                scene_hash: format!("{:016x}", ctx.scene.hash),
+                run_id: ctx.run_id.into(),
+                participants: ctx.roles.iter().map(|r| r.name().to_string()).collect(),
+                metrics_bytes: bytes,
+                wall_s,
+            };
+            let path = dir.join("manifest.json");
+            checkpoint::write_synced(&path, (serde_json::to_string_pretty(&manifest)? + "\n").as_bytes())
+                .with_context(|| format!("writing {}", path.display()))?;
+            super::resume::prune(ctx.dir, &manifest);
         }
         Ok(())
     }
@@ -396,6 +455,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
     /// Closes the outputs and says how the run ended.
     fn finish(mut self) -> anyhow::Result<(RunOutcome, serde_json::Value)> {
         let ctx = self.ctx;
+        self.record_checkpoints()?;
         if ctx.opts.announce {
             self.progress.finish(self.metrics.last, self.released);
         }

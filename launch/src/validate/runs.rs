@@ -20,6 +20,7 @@ pub fn load_with(path: &Path, overrides: &[String]) -> anyhow::Result<grains_pro
 pub fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyhow::Result<RunOutcome> {
     run(&RunOptions {
         bridge: None,
+        resume: None,
         scene_path: scene.to_path_buf(),
         transport: TransportKind::Ipc,
         external: Vec::new(),

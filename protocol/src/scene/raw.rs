@@ -164,6 +164,7 @@ pub struct RawBridge {
 #[serde(deny_unknown_fields)]
 pub struct RawOutput {
     pub frames_every: Option<u64>,
+    pub checkpoint_every: Option<u64>,
 }
 
 #[derive(Deserialize)]

@@ -9,7 +9,7 @@ use super::{Scene, from_str, hash_bytes};
 /// `text` (a scene with `substeps = "auto"`, validated as `scene`) with `run.dt = dt`,
 /// `coupling.substeps = substeps` and `coupling.dem_dt = dem_dt` (the DEM step they make,
 /// stated). Cadences counted in macro-steps (`run.steps`,
-/// `output.frames_every`, `oracle.every`, where the file gives them) are rescaled to keep
+/// `output.frames_every`, `output.checkpoint_every`, `oracle.every`, where the file gives them) are rescaled to keep
 /// their length in time (at least 1); `run.duration` stays as it is.
 pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32, dem_dt: f64) -> Result<(Scene, String), SceneError> {
     let plain = |message: String| SceneError {
@@ -24,6 +24,7 @@ pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32, de
     let counts = [
         FieldPath::root("run").key("steps"),
         FieldPath::root("output").key("frames_every"),
+        FieldPath::root("output").key("checkpoint_every"),
         FieldPath::root("oracle").key("every"),
     ];
     for path in counts {

@@ -18,6 +18,10 @@ pub struct CommonArgs {
     /// The run's output directory: frames are written under it (none if not given).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    /// Resume from this checkpoint directory (`<run dir>/checkpoints/<step>`, one with a
+    /// `manifest.json`): the state of this participant's file there, then the next step.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
     /// Test hook: announce this protocol version instead of the one built in, to check that a
     /// run refuses a participant of another version.
     #[arg(long, hide = true)]

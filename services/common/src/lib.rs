@@ -7,11 +7,13 @@
 //! - [`synthetic`]: the synthetic solver of test scenes (issue 2), clearly apart from physics;
 //! - [`grid`]: the scene's background grid and kernel, shared by the MPM and the DEM's rasters;
 //! - [`zones`]: the layered zones of hybrid bodies (which grains and points exist, their weights);
+//! - [`checkpoint`]: a participant's state written after a step, and read back to resume;
 //! - [`vtu`]: VTU frames of point clouds (grains, material points) for ParaView;
 //! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares;
 //! - [`fault`]: fault injection from the environment (`GRAINS_FAULT`), read once, for the
 //!   libraries to take as parameters.
 
+pub mod checkpoint;
 pub mod cli;
 pub mod fault;
 pub mod grid;
@@ -67,6 +69,7 @@ pub fn participant_main(
             protocol_version: args.claim_protocol_version.unwrap_or(grains_protocol::PROTOCOL_VERSION),
             checksums: scene.synthetic.as_ref().is_none_or(|s| s.checksum),
             out_dir: args.out_dir.clone(),
+            resume: args.resume.as_deref().map(checkpoint::Resume::open).transpose()?,
         };
         body(&transport, &scene, &opts)
     };

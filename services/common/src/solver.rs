@@ -85,6 +85,16 @@ pub trait Solver {
         let _ = (step, changes);
         bail!("this solver does not take oracle epochs")
     }
+    /// Its whole state after a step, for a checkpoint ([`crate::checkpoint`]): what
+    /// [`Solver::restore`] needs to go on bit for bit.
+    fn save(&self) -> anyhow::Result<Vec<u8>> {
+        bail!("this solver cannot write checkpoints")
+    }
+    /// Takes back the state of [`Solver::save`], in a solver just built from the scene.
+    fn restore(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
+        let _ = bytes;
+        bail!("this solver cannot resume from checkpoints")
+    }
     /// A `snapshot` or `set` command, between steps (after step `done`); why not, if it
     /// cannot be carried out.
     fn command(&mut self, done: u64, c: &Control) -> Result<(), String> {
@@ -305,6 +315,34 @@ pub struct ParticipantOptions {
     pub checksums: bool,
     /// The run's output directory (frames go under it), if outputs are wanted.
     pub out_dir: Option<std::path::PathBuf>,
+    /// The checkpoint to resume from (`grains resume`), if any.
+    pub resume: Option<crate::checkpoint::Resume>,
+}
+
+impl ParticipantOptions {
+    /// The step after which this participant starts (0, or the checkpoint's).
+    pub fn start_after(&self) -> u64 {
+        self.resume.as_ref().map_or(0, |r| r.step)
+    }
+
+    /// Writes this participant's checkpoint after `step` if one is due (before its summary
+    /// of the step: the launcher counts a checkpoint complete once it has every summary).
+    pub fn checkpoint(
+        &self,
+        scene: &Scene,
+        role: Role,
+        step: u64,
+        payload: impl FnOnce() -> anyhow::Result<Vec<u8>>,
+    ) -> anyhow::Result<()> {
+        if !crate::checkpoint::due(scene, step) {
+            return Ok(());
+        }
+        let Some(dir) = &self.out_dir else {
+            bail!("output.checkpoint_every is set, but this participant has no output directory (--out-dir) to write checkpoints in");
+        };
+        crate::checkpoint::write(dir, role, scene.hash, step, &payload()?)?;
+        Ok(())
+    }
 }
 
 /// Runs one solver participant to the end of the run.
@@ -320,14 +358,20 @@ pub fn run<T: Transport, S: Solver>(
     make: impl FnOnce(&ZoneField) -> anyhow::Result<S>,
 ) -> anyhow::Result<()> {
     let mut session = join(transport, role, scene, opts)?;
+    let resume = |solver: &mut S| match &opts.resume {
+        Some(r) => solver.restore(&crate::checkpoint::read(r, role, scene.hash)?),
+        None => Ok(()),
+    };
     if scene.time_owner() == role {
         let mut solver = make(&ZoneField::layered(scene))?;
-        return run_alone(&mut session, scene, &mut solver);
+        resume(&mut solver)?;
+        return run_alone(&mut session, scene, opts, &mut solver);
     }
     let mut ports = CoupledPorts::<T>::open(&session, scene)?;
     session.wait_until("the coupler, the oracle and the launcher", |_| ports.connected())?;
     let zones = ports.initial_zones(&session, scene)?;
     let mut solver = make(&zones)?;
+    resume(&mut solver)?;
     session.ready()?;
     loop {
         let wait_start = Instant::now();
@@ -441,6 +485,7 @@ impl<T: Transport> CoupledPorts<T> {
             compute += t.elapsed();
         }
 
+        opts.checkpoint(scene, session.role, window.step, || solver.save())?;
         let mut report = solver.report();
         report.checksum = sent_checksum;
         publish_summary(session, &mut self.summary_pub, window, &report, compute, wait)?;
@@ -543,13 +588,18 @@ pub fn next_step<T: Transport>(
 }
 
 /// A solver that owns time: it steps by itself and obeys control commands between steps.
-fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scene, solver: &mut S) -> anyhow::Result<()> {
+fn run_alone<T: Transport, S: Solver>(
+    session: &mut Session<'_, T>,
+    scene: &Scene,
+    opts: &ParticipantOptions,
+    solver: &mut S,
+) -> anyhow::Result<()> {
     let mut clock = RunClock::open(session)?;
     let mut summary_pub = session.publisher::<Summary, StepHeader>(&names::SUMMARY, 1)?;
     session.wait_until("the launcher", |_| clock.connected() && summary_pub.subscriber_count() >= 1)?;
     session.ready()?;
     let mut viewer = Viewer::open(session)?;
-    for step in 1..=scene.steps {
+    for step in opts.start_after() + 1..=scene.steps {
         let go_on = clock.obey(session, step - 1, |c| match solver.command(step - 1, c) {
             Ok(()) => AckStatus::Applied,
             Err(why) => {
@@ -565,7 +615,9 @@ fn run_alone<T: Transport, S: Solver>(session: &mut Session<'_, T>, scene: &Scen
         let window = StepWindow::of(scene, step);
         let t = Instant::now();
         solver.step_alone(&window)?;
-        publish_summary(session, &mut summary_pub, &window, &solver.report(), t.elapsed(), Duration::ZERO)?;
+        let compute = t.elapsed();
+        opts.checkpoint(scene, session.role, step, || solver.save())?;
+        publish_summary(session, &mut summary_pub, &window, &solver.report(), compute, Duration::ZERO)?;
         if let Some(v) = &mut viewer {
             v.offer(session, &window, &*solver)?;
         }

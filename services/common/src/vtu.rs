@@ -55,6 +55,35 @@ impl PointFrames {
         })
     }
 
+    /// The frames of a run resumed after `step`: those up to it stay listed, later ones (a
+    /// killed run may have written some) are deleted; `None` starts afresh as [`PointFrames::new`].
+    pub fn open(run_dir: &Path, name: &str, resume: Option<u64>) -> std::io::Result<Self> {
+        let mut frames = Self::new(run_dir, name)?;
+        let Some(after) = resume else { return Ok(frames) };
+        let step_of = |file: &str| {
+            file.strip_prefix(&format!("{name}_"))
+                .and_then(|f| f.strip_suffix(".vtu"))
+                .and_then(|s| s.parse::<u64>().ok())
+        };
+        let pvd = frames.dir.join(format!("{name}.pvd"));
+        if let Ok(listed) = collection(&pvd) {
+            for (t, path) in listed {
+                let file = path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+                if step_of(&file).is_some_and(|s| s <= after) {
+                    frames.written.push((t, file));
+                }
+            }
+        }
+        for entry in std::fs::read_dir(&frames.dir)?.flatten() {
+            let file = entry.file_name().to_string_lossy().into_owned();
+            if step_of(&file).is_some_and(|s| s > after) {
+                std::fs::remove_file(entry.path())?;
+            }
+        }
+        frames.write_collection()?;
+        Ok(frames)
+    }
+
     pub fn write(&mut self, step: u64, time: f64, positions: &[[f64; 3]], fields: &[Field]) -> std::io::Result<PathBuf> {
         let n = positions.len();
         let mut s = String::with_capacity(40 * n * (2 + fields.len()) + 1024);
@@ -83,13 +112,17 @@ impl PointFrames {
         let path = self.dir.join(&file);
         write_atomic(&path, &s)?;
         self.written.push((time, file));
+        self.write_collection()?;
+        Ok(path)
+    }
+
+    fn write_collection(&self) -> std::io::Result<()> {
         let mut pvd = String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n");
         for (t, f) in &self.written {
             let _ = writeln!(pvd, "<DataSet timestep=\"{}\" file=\"{f}\"/>", frame_time(*t));
         }
         pvd.push_str("</Collection>\n</VTKFile>\n");
-        write_atomic(&self.dir.join(format!("{}.pvd", self.name)), &pvd)?;
-        Ok(path)
+        write_atomic(&self.dir.join(format!("{}.pvd", self.name)), &pvd)
     }
 }
 

@@ -22,7 +22,7 @@
 use crate::space::{Space, Vector};
 
 /// Contact law parameters of a material [SI].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ContactParams {
     /// Normal stiffness k_n [N/m].
     pub stiffness_normal: f64,
@@ -44,7 +44,7 @@ pub struct ContactParams {
 }
 
 /// Normal (and tangential) damping of a contact.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Damping {
     /// From the restitution coefficient e ∈ [0, 1] (0: critically damped) and the pair's
     /// reduced mass.
@@ -115,7 +115,7 @@ pub fn reduced_mass(m_i: f64, m_j: f64) -> f64 {
 }
 
 /// History of one contact: the tangential anchor spring and whether a cohesive bond holds.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ContactState<V> {
     pub spring: V,
     pub bonded: bool,

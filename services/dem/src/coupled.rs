@@ -93,6 +93,16 @@ impl<S: Space> CoupledStep<S> {
         }
     }
 
+    /// What one step hands the next (the flip transfer's node accelerations), for a
+    /// checkpoint; the rest is the scratch of a step.
+    pub fn carry(&self) -> &[(u64, S::V)] {
+        &self.accel
+    }
+
+    pub fn restore(&mut self, accel: Vec<(u64, S::V)>) {
+        self.accel = accel;
+    }
+
     /// Alg. 2 and 4 in one call: [`CoupledStep::advance`], then [`CoupledStep::rasterize`].
     pub fn predict(&mut self, state: &mut DemState<S>, pipeline: &mut DemPipeline<S>, dt: f64, substeps: usize) -> &[NodeMomentum<S>] {
         self.advance(state, pipeline, dt, substeps);

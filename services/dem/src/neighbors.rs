@@ -15,7 +15,8 @@ use rayon::prelude::*;
 type History<K, V> = Vec<(K, ContactState<V>)>;
 
 /// One listed grain pair and what the last force evaluation left for it.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct PairSlot<S: Space> {
     pub i: u32,
     pub j: u32,
@@ -23,7 +24,8 @@ pub struct PairSlot<S: Space> {
 }
 
 /// One listed grain–wall pair.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct WallSlot<S: Space> {
     pub grain: u32,
     pub wall: u32,
@@ -33,7 +35,8 @@ pub struct WallSlot<S: Space> {
     pub active: bool,
 }
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct NeighborList<S: Space> {
     pub pairs: Vec<PairSlot<S>>,
     pub walls: Vec<WallSlot<S>>,

@@ -23,7 +23,8 @@ use rayon::prelude::*;
 
 /// What the pair loop reads of one grain, packed in one place (the arrays of
 /// [`crate::state::Grains`] spread it over seven cache lines); refreshed by the drift.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct Hot<S: Space> {
     pub x: S::V,
     pub v: S::V,
@@ -39,7 +40,8 @@ pub struct Hot<S: Space> {
 type Window<S> = (usize, Vec<GrainForce<S>>);
 
 /// Per-grain result of the force gather.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct GrainForce<S: Space> {
     pub force: S::V,
     pub torque: S::Ang,
@@ -66,6 +68,20 @@ pub struct DemPipeline<S: Space> {
     /// due meanwhile waits for the next preparation out of it ([`DemPipeline::settle`] or the
     /// next step of [`DemPipeline::run`]).
     hold_order: bool,
+    sort_due: bool,
+}
+
+/// See [`DemPipeline::carry`]. (The per-range buffers are not in it: every evaluation
+/// starts them from zero.)
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
+pub struct Carry<S: Space> {
+    neighbors: NeighborList<S>,
+    forces: Vec<GrainForce<S>>,
+    hot: Vec<Hot<S>>,
+    direct: bool,
+    prepared: bool,
+    resync: bool,
     sort_due: bool,
 }
 
@@ -115,6 +131,31 @@ impl<S: Space> DemPipeline<S> {
             hold_order: false,
             sort_due: false,
         })
+    }
+
+    /// What the pipeline carries from one step to the next (the neighbour list with the
+    /// contact histories, the last forces, its bookkeeping), for a checkpoint: a pipeline
+    /// given it back with [`DemPipeline::restore`] continues bit for bit.
+    pub fn carry(&self) -> Carry<S> {
+        Carry {
+            neighbors: self.neighbors.clone(),
+            forces: self.forces.clone(),
+            hot: self.hot.clone(),
+            direct: self.direct,
+            prepared: self.prepared,
+            resync: self.resync,
+            sort_due: self.sort_due,
+        }
+    }
+
+    pub fn restore(&mut self, c: Carry<S>) {
+        self.neighbors = c.neighbors;
+        self.forces = c.forces;
+        self.hot = c.hot;
+        self.direct = c.direct;
+        self.prepared = c.prepared;
+        self.resync = c.resync;
+        self.sort_due = c.sort_due;
     }
 
     /// Forgets the forces of the last step: call after adding, removing or moving grains

@@ -5,7 +5,8 @@ use crate::space::Space;
 
 /// Grains, one entry per grain in every array. `id` is stable (outputs, history, spawn and
 /// delete lists); storage indices may change.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct Grains<S: Space> {
     pub id: Vec<u64>,
     /// Centre [m].
@@ -91,7 +92,8 @@ impl<S: Space> Grains<S> {
 }
 
 /// A boundary the grains cannot pass.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub enum WallShape<S: Space> {
     /// Half-space boundary through `point`; grains stay on the side `normal` points to.
     Plane { point: S::V, normal: S::V },
@@ -104,7 +106,8 @@ pub enum WallShape<S: Space> {
 
 /// A wall, possibly scripted: it translates at `velocity` and a drum spins at `spin` about
 /// its axis. The force the grains exert on it is recorded every step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct Wall<S: Space> {
     pub shape: WallShape<S>,
     /// Translation velocity [m/s].
@@ -156,7 +159,7 @@ impl<S: Space> Wall<S> {
 }
 
 /// Domain of the grains: bounds, and which axes are periodic.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Domain {
     pub min: [f64; 3],
     pub max: [f64; 3],
@@ -176,7 +179,8 @@ impl Domain {
 }
 
 /// Everything that stays fixed during a step.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct DemParams<S: Space> {
     pub materials: Vec<ContactParams>,
     pub gravity: S::V,
@@ -187,7 +191,8 @@ pub struct DemParams<S: Space> {
 }
 
 /// A complete DEM model: grains, walls, parameters.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct DemState<S: Space> {
     pub grains: Grains<S>,
     pub walls: Vec<Wall<S>>,

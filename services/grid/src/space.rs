@@ -30,6 +30,8 @@ pub trait Vector:
     + Neg<Output = Self>
     + AddAssign
     + SubAssign
+    + serde::Serialize
+    + serde::de::DeserializeOwned
     + 'static
 {
     fn dot(self, o: Self) -> f64;
@@ -130,7 +132,7 @@ pub trait Space: Copy + Debug + Default + Send + Sync + 'static {
     /// Angular velocity and torque (z component in 2D).
     type Ang: Vector;
     /// Orientation (angle in 2D, unit quaternion in 3D).
-    type Rot: Copy + Debug + Default + PartialEq + Send + Sync + 'static;
+    type Rot: Copy + Debug + Default + PartialEq + Send + Sync + serde::Serialize + serde::de::DeserializeOwned + 'static;
 
     /// Moment of inertia of a grain over m r² (disk 1/2, solid sphere 2/5).
     const INERTIA_FACTOR: f64;

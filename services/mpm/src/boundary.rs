@@ -19,14 +19,15 @@
 use grains_grid::space::segment_frame;
 use grains_grid::{Space, Vector};
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Contact {
     Sticky,
     Slip,
     Friction(f64),
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub enum Geometry<S: Space> {
     /// Half-space boundary through `point` with inward unit `normal`.
     Plane { point: S::V, normal: S::V },
@@ -39,7 +40,8 @@ pub enum Geometry<S: Space> {
     Drum { center: S::V, radius: f64, spin: f64 },
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct Wall<S: Space> {
     pub geometry: Geometry<S>,
     pub contact: Contact,

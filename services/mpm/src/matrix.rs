@@ -4,7 +4,16 @@ use glam::{DMat2, DMat3, DVec2, DVec3};
 use std::ops::{Add, Mul, Sub};
 
 pub trait Matrix:
-    Copy + Send + Sync + std::fmt::Debug + PartialEq + Add<Output = Self> + Sub<Output = Self> + Mul<f64, Output = Self>
+    Copy
+    + Send
+    + Sync
+    + std::fmt::Debug
+    + PartialEq
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<f64, Output = Self>
+    + serde::Serialize
+    + serde::de::DeserializeOwned
 {
     const DIM: usize;
     fn identity() -> Self;

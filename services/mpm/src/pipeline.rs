@@ -199,6 +199,20 @@ pub struct MpmPipeline<S: MpmSpace> {
     steps: u64,
 }
 
+impl<S: MpmSpace> MpmPipeline<S> {
+    /// What the pipeline carries from one step to the next beside the points: the time (it
+    /// moves walls) and the step count (it times the points' re-sort). The grid is rebuilt
+    /// from the points every step.
+    pub fn carry(&self) -> (f64, u64) {
+        (self.time, self.steps)
+    }
+
+    pub fn restore(&mut self, (time, steps): (f64, u64)) {
+        self.time = time;
+        self.steps = steps;
+    }
+}
+
 /// Points per task in the per-point passes.
 const POINT_TASK: usize = 4096;
 

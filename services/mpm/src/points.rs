@@ -5,7 +5,8 @@ use grains_grid::{Space, Vector};
 
 /// Material points. The elastic strain b^e and the Kirchhoff stress τ are kept together: the
 /// constitutive update (end of phase 2) writes both, the force computation (phase 1) reads τ.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct Points<S: MpmSpace> {
     /// Identity of a point (the pipeline reorders points by grid block from time to time).
     pub id: Vec<u64>,

@@ -25,8 +25,10 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     })?;
     session.ready()?;
 
-    let mut last = 0;
-    for step in 1..=scene.steps {
+    // The coupler carries nothing from one step to the next: its checkpoint is empty, and a
+    // resumed run just starts after the checkpoint's step.
+    let mut last = opts.start_after();
+    for step in last + 1..=scene.steps {
         session.watch_peers()?;
         grains_service::telemetry::set_step(Some(step));
         if !ports.obey(&session, scene, step)? {
@@ -38,6 +40,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         let wait_start = Instant::now();
         let (report, compute) = ports.couple(&session, step, header, opts.checksums)?;
         let wait = wait_start.elapsed() - compute;
+        opts.checkpoint(scene, Role::Coupler, step, || Ok(Vec::new()))?;
         publish_summary(&session, &mut ports.summary_pub, &window, &report, compute, wait)?;
         last = step;
     }

@@ -11,8 +11,9 @@ use std::path::{Path, PathBuf};
 pub struct FrameWriter(PointFrames);
 
 impl FrameWriter {
-    pub fn new(run_dir: &Path) -> std::io::Result<Self> {
-        Ok(FrameWriter(PointFrames::new(run_dir, "grains")?))
+    /// The grains' frames of a run; of a run resumed after step `resume`, see [`PointFrames::open`].
+    pub fn new(run_dir: &Path, resume: Option<u64>) -> std::io::Result<Self> {
+        Ok(FrameWriter(PointFrames::open(run_dir, "grains", resume)?))
     }
 
     pub fn write<S: Space>(&mut self, step: u64, state: &DemState<S>, pipeline: &DemPipeline<S>) -> std::io::Result<PathBuf> {

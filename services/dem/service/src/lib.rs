@@ -41,6 +41,6 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 fn run_physics<T: Transport, S: Space>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     participant::run(transport, Role::Dem, scene, opts, |zones| {
         let state = setup::build_state::<S>(scene, zones)?;
-        solver::DemSolver::new(scene, state, opts.out_dir.as_deref())
+        solver::DemSolver::new(scene, state, opts.out_dir.as_deref(), opts.resume.as_ref().map(|r| r.step))
     })
 }

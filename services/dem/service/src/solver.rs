@@ -32,19 +32,34 @@ pub struct DemSolver<S: Space> {
     /// density, the first hybrid body's; and the hybrid weight w.
     spawn: Option<(u32, f64)>,
     weight: f64,
+    /// The step a resumed run started after (its outputs continue from there).
+    resumed: Option<u64>,
+}
+
+/// What a checkpoint holds of the DEM (see [`Solver::save`]).
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
+struct Saved<S: Space> {
+    state: DemState<S>,
+    pipeline: grains_dem::pipeline::Carry<S>,
+    accel: Vec<(u64, S::V)>,
+    energy_bound: f64,
 }
 
 impl<S: Space> DemSolver<S> {
-    pub fn new(scene: &Scene, state: DemState<S>, out_dir: Option<&std::path::Path>) -> anyhow::Result<Self> {
+    /// The DEM of `scene` from `state`, its outputs in `out_dir`; `resume`: the step a resumed
+    /// run starts after (outputs up to it are kept, later ones dropped; no frame of step 0).
+    pub fn new(scene: &Scene, state: DemState<S>, out_dir: Option<&std::path::Path>, resume: Option<u64>) -> anyhow::Result<Self> {
         let pipeline = DemPipeline::new(scene.threads as usize)?;
         let extent = grains_service::grid::scene_extent(scene);
         let energy_bound = runaway_bound(extent, S::from_array(scene.gravity).length(), &state);
         let (grid, kernel) = grains_service::grid::scene_grid(scene);
         let frames = match out_dir {
-            Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir)?),
+            Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir, resume)?),
             _ => None,
         };
         let walls_log = match out_dir {
+            Some(dir) if !state.walls.is_empty() && resume.is_some() => Some(walls_log_after(&dir.join("walls.csv"), resume.unwrap_or(0))?),
             Some(dir) if !state.walls.is_empty() => {
                 use std::io::Write as _;
                 let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("walls.csv"))?);
@@ -81,8 +96,11 @@ impl<S: Space> DemSolver<S> {
                 (index, scene.materials[b.material].density)
             }),
             weight: scene.coupling.weight,
+            resumed: resume,
         };
-        if let Some((f, _)) = &mut solver.frames {
+        if let Some((f, _)) = &mut solver.frames
+            && resume.is_none()
+        {
             f.write(0, &solver.state, &solver.pipeline)?;
         }
         Ok(solver)
@@ -108,6 +126,21 @@ impl<S: Space> DemSolver<S> {
         }
         Ok(())
     }
+}
+
+/// `walls.csv` of a run resumed after `step`: its rows up to that step kept, open to append.
+fn walls_log_after(path: &std::path::Path, step: u64) -> std::io::Result<std::io::BufWriter<std::fs::File>> {
+    let text = std::fs::read_to_string(path)?;
+    let mut kept = String::new();
+    for (k, line) in text.lines().enumerate() {
+        let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
+        if k == 0 || row_step.is_some_and(|s| s <= step) {
+            kept.push_str(line);
+            kept.push('\n');
+        }
+    }
+    std::fs::write(path, kept)?;
+    Ok(std::io::BufWriter::new(std::fs::OpenOptions::new().append(true).open(path)?))
 }
 
 /// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
@@ -199,7 +232,7 @@ impl<S: Space> Solver for DemSolver<S> {
             (Some(Command::Snapshot), _) => {
                 if self.frames.is_none() {
                     let dir = self.out_dir.as_deref().ok_or("no output directory: nowhere to write a snapshot")?;
-                    let writer = FrameWriter::new(dir).map_err(|e| e.to_string())?;
+                    let writer = FrameWriter::new(dir, self.resumed).map_err(|e| e.to_string())?;
                     self.frames = Some((writer, 0));
                 }
                 let (f, every) = self.frames.as_mut().expect("made above");
@@ -333,6 +366,26 @@ impl<S: Space> Solver for DemSolver<S> {
         if !changes.spawn_grains.is_empty() {
             self.energy_bound = self.energy_bound.max(runaway_bound(self.extent, self.gravity, &self.state));
         }
+        Ok(())
+    }
+
+    /// The state, the pipeline's neighbour list with the contact histories, the flip
+    /// transfer's node accelerations, and the runaway bound.
+    fn save(&self) -> anyhow::Result<Vec<u8>> {
+        grains_service::checkpoint::encode(&Saved {
+            state: self.state.clone(),
+            pipeline: self.pipeline.carry(),
+            accel: self.coupled.carry().to_vec(),
+            energy_bound: self.energy_bound,
+        })
+    }
+
+    fn restore(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
+        let saved: Saved<S> = grains_service::checkpoint::decode(bytes)?;
+        self.state = saved.state;
+        self.pipeline.restore(saved.pipeline);
+        self.coupled.restore(saved.accel);
+        self.energy_bound = saved.energy_bound;
         Ok(())
     }
 

@@ -22,8 +22,8 @@ fn the_substeps_come_from_the_step_window() {
     let mut expected = state();
     let mut pipeline = DemPipeline::<D2>::new(s.threads as usize).unwrap();
     let (mut alone, mut coupled) = (
-        DemSolver::new(&s, state(), None).unwrap(),
-        DemSolver::new(&s, state(), None).unwrap(),
+        DemSolver::new(&s, state(), None, None).unwrap(),
+        DemSolver::new(&s, state(), None, None).unwrap(),
     );
     let window = StepWindow {
         substeps: 50,

@@ -40,6 +40,6 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
 fn run_physics<T: Transport, S: MpmSpace>(transport: &T, scene: &Scene, opts: &ParticipantOptions) -> anyhow::Result<()> {
     participant::run(transport, Role::Mpm, scene, opts, |zones| {
         let (points, params) = setup::build::<S>(scene, zones).map_err(anyhow::Error::msg)?;
-        solver::MpmSolver::new(scene, points, params, opts.out_dir.as_deref())
+        solver::MpmSolver::new(scene, points, params, opts.out_dir.as_deref(), opts.resume.as_ref().map(|r| r.step))
     })
 }

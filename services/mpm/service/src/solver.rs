@@ -28,15 +28,37 @@ pub struct MpmSolver<S: MpmSpace> {
     /// New points' packing fraction (the material's) and the hybrid weight w.
     packing: f64,
     weight: f64,
+    /// The step a resumed run started after (its outputs continue from there).
+    resumed: Option<u64>,
+}
+
+/// What a checkpoint holds of the MPM (see [`Solver::save`]): the points, what commands may
+/// have changed (gravity, the walls), the pipeline's time and step count, the runaway bound.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
+struct Saved<S: MpmSpace> {
+    points: Points<S>,
+    gravity: S::V,
+    walls: Vec<grains_mpm::boundary::Wall<S>>,
+    pipeline: (f64, u64),
+    energy_bound: f64,
 }
 
 impl<S: MpmSpace> MpmSolver<S> {
-    pub fn new(scene: &Scene, points: Points<S>, params: MpmParams<S>, out_dir: Option<&std::path::Path>) -> anyhow::Result<Self> {
+    /// The MPM of `scene` from `points`, its frames in `out_dir`; `resume`: the step a resumed
+    /// run starts after (frames up to it are kept, later ones dropped; no frame of step 0).
+    pub fn new(
+        scene: &Scene,
+        points: Points<S>,
+        params: MpmParams<S>,
+        out_dir: Option<&std::path::Path>,
+        resume: Option<u64>,
+    ) -> anyhow::Result<Self> {
         let pipeline = MpmPipeline::new(scene.threads as usize).map_err(anyhow::Error::msg)?;
         let extent = grains_service::grid::scene_extent(scene);
         let energy_bound = runaway_bound(extent, &points, &params);
         let frames = match out_dir {
-            Some(dir) if scene.output.frames_every > 0 => Some((PointFrames::new(dir, "points")?, scene.output.frames_every)),
+            Some(dir) if scene.output.frames_every > 0 => Some((PointFrames::open(dir, "points", resume)?, scene.output.frames_every)),
             _ => None,
         };
         let mut solver = MpmSolver {
@@ -54,8 +76,11 @@ impl<S: MpmSpace> MpmSolver<S> {
                 .find_map(|m| m.mpm.as_ref().map(|m| m.packing))
                 .unwrap_or(1.0),
             weight: scene.coupling.weight,
+            resumed: resume,
         };
-        solver.write_frame(0)?;
+        if resume.is_none() {
+            solver.write_frame(0)?;
+        }
         Ok(solver)
     }
 
@@ -227,7 +252,7 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             (Some(Command::Snapshot), _) => {
                 if self.frames.is_none() {
                     let dir = self.out_dir.as_deref().ok_or("no output directory: nowhere to write a snapshot")?;
-                    self.frames = Some((PointFrames::new(dir, "points").map_err(|e| e.to_string())?, 0));
+                    self.frames = Some((PointFrames::open(dir, "points", self.resumed).map_err(|e| e.to_string())?, 0));
                 }
                 let every = self.frames.as_ref().map_or(0, |f| f.1);
                 if every == 0 || !done.is_multiple_of(every) {
@@ -314,6 +339,26 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
         if !changes.spawn_points.is_empty() || !changes.scale_points.is_empty() {
             self.energy_bound = self.energy_bound.max(runaway_bound(self.extent, &self.points, &self.params));
         }
+        Ok(())
+    }
+
+    fn save(&self) -> anyhow::Result<Vec<u8>> {
+        grains_service::checkpoint::encode(&Saved {
+            points: self.points.clone(),
+            gravity: self.params.gravity,
+            walls: self.params.walls.clone(),
+            pipeline: self.pipeline.carry(),
+            energy_bound: self.energy_bound,
+        })
+    }
+
+    fn restore(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
+        let saved: Saved<S> = grains_service::checkpoint::decode(bytes)?;
+        self.points = saved.points;
+        self.params.gravity = saved.gravity;
+        self.params.walls = saved.walls;
+        self.pipeline.restore(saved.pipeline);
+        self.energy_bound = saved.energy_bound;
         Ok(())
     }
 

@@ -15,7 +15,7 @@ fn scene() -> scene::Scene {
 
 fn solver(s: &scene::Scene) -> MpmSolver<D2> {
     let (points, params) = setup::build::<D2>(s, &grains_service::zones::ZoneField::layered(s)).unwrap();
-    MpmSolver::new(s, points, params, None).unwrap()
+    MpmSolver::new(s, points, params, None, None).unwrap()
 }
 
 #[test]

@@ -36,6 +36,19 @@ pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneErr
         field: Some(field.into()),
         message,
     };
+    if let Some(o) = scene.oracle.as_ref().filter(|o| o.kind.adaptive())
+        && scene.output.checkpoint_every > 0
+    {
+        return Err(err(
+            "output.checkpoint_every",
+            format!(
+                "checkpoints do not cover moving zones yet (oracle.kind = \"{}\" every {} steps): the oracle's and the solvers' epoch state \
+                 is not saved; use fixed zones or run without checkpoints",
+                format!("{:?}", o.kind).to_lowercase(),
+                o.every
+            ),
+        ));
+    }
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
         Some(kind @ (OracleKind::Surface | OracleKind::Layered)) => {
@@ -154,6 +167,9 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
             wait += w;
             compute += c;
         }
+        // Fixed zones carry nothing from one step to the next (adaptive ones are refused
+        // checkpoints before the run starts, `check_scene`).
+        opts.checkpoint(scene, Role::Oracle, window.step, || Ok(Vec::new()))?;
         publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
         compute = Duration::ZERO;
     }

@@ -1,0 +1,147 @@
+//! Issue 25: checkpoint and restart. A run whose launcher is killed (SIGKILL) mid-way and
+//! then resumed with `grains resume` ends with the same physics columns of `metrics.csv`,
+//! the same frames (byte for byte) and the same `walls.csv` as the run that never stopped.
+
+use super::run_to_end;
+use grains_system_tests::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The physics of a finished run: `metrics.csv` without its timings, every frame's bytes
+/// (by file name), and `walls.csv` if there is one.
+struct Outputs {
+    metrics: String,
+    frames: Vec<(String, Vec<u8>)>,
+    walls: Option<String>,
+}
+
+fn outputs(dir: &Path) -> Outputs {
+    let metrics = grains_launch::metrics::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
+    let mut frames: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir.join("frames"))
+        .unwrap()
+        .flatten()
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
+        .collect();
+    frames.sort();
+    Outputs {
+        metrics,
+        frames,
+        walls: std::fs::read_to_string(dir.join("walls.csv")).ok(),
+    }
+}
+
+fn refs(a: &[String]) -> Vec<&str> {
+    a.iter().map(String::as_str).collect()
+}
+
+/// A DEM, an MPM and a fixed-zone hybrid scene (the last with the flip transfer's carried
+/// node accelerations), each killed after a checkpoint and rows beyond it, then resumed.
+#[test]
+fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
+    let _machine = machine();
+    let out = out_dir("restart");
+    let out_s = out.to_str().unwrap();
+    let scenes = [
+        ("tests/scenes/dem_small_2d.toml", "run.steps=3000", 500),
+        ("tests/scenes/mpm_small_2d.toml", "run.steps=3000", 500),
+        ("tests/scenes/hybrid_pile_2d.toml", "run.duration=0.06", 200),
+    ];
+    for (scene, steps, every) in scenes {
+        let every_s = every.to_string();
+        let args = |extra: &[&'static str]| -> Vec<String> {
+            let mut a: Vec<String> = [
+                "run",
+                scene,
+                "--out",
+                out_s,
+                "--quiet",
+                "--set",
+                steps,
+                "--checkpoint-every",
+                &every_s,
+            ]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+            a.extend(["--set".to_string(), format!("output.frames_every={}", every / 2)]);
+            a.extend(extra.iter().map(|s| s.to_string()));
+            a
+        };
+        let (status, err) = run_to_end(&refs(&args(&[])));
+        assert!(status.success(), "{scene}: {err}");
+        let whole = outputs(&run_dir(&err));
+
+        let mut launcher = Running::grains(&refs(&args(&[])));
+        let err = launcher.wait_for("started as processes", Duration::from_secs(60));
+        let dir = run_dir(&err);
+        // Killed once the first checkpoint is complete and the run has gone on past it, so
+        // that rows after the checkpoint must be dropped.
+        let manifest = dir.join(format!("checkpoints/{every:010}/manifest.json"));
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while !manifest.exists() || std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < every + 20 {
+            assert!(Instant::now() < deadline, "{scene}: no checkpoint: {}", launcher.stderr());
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        launcher.child.kill().expect("SIGKILL the launcher");
+        let _ = launcher.child.wait();
+        let rows = std::fs::read_to_string(dir.join("metrics.csv.part")).unwrap().lines().count() - 1;
+        std::thread::sleep(Duration::from_millis(500));
+        assert!(!dir.join("summary.json").exists(), "{scene}: a killed launcher wrote no summary");
+
+        let (status, err) = run_to_end(&["resume", dir.to_str().unwrap(), "--quiet"]);
+        assert!(status.success(), "{scene}: resume: {err}");
+        let s = summary(&dir);
+        assert_eq!(s["status"], "completed", "{scene}: {s}");
+        let after = s["resumed_after_step"].as_u64().expect("resumed_after_step");
+        assert!(
+            after >= every as u64 && (after as usize) < rows,
+            "{scene}: resumed after step {after}, killed at row {rows}: rows after the checkpoint were there to drop"
+        );
+        let resumed = outputs(&dir);
+        assert_eq!(resumed.metrics, whole.metrics, "{scene}: metrics differ after the resume");
+        let names = |o: &Outputs| o.frames.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&resumed), names(&whole), "{scene}: other frames");
+        for ((name, a), (_, b)) in resumed.frames.iter().zip(&whole.frames) {
+            assert!(a == b, "{scene}: frame {name} differs after the resume");
+        }
+        assert_eq!(resumed.walls, whole.walls, "{scene}: walls.csv differs after the resume");
+
+        // A completed run has nothing to resume.
+        let (status, err) = run_to_end(&["resume", dir.to_str().unwrap(), "--quiet"]);
+        assert_eq!(status.code(), Some(2), "{scene}: {err}");
+        assert!(err.contains("nothing to resume"), "{err}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A run without checkpoints cannot be resumed, and checkpoints of moving zones are refused
+/// before a run starts; both say why (exit code 2).
+#[test]
+fn resume_without_a_checkpoint_and_checkpoints_of_moving_zones_are_refused() {
+    let _machine = machine();
+    let out = out_dir("restart-refused");
+    let out_s = out.to_str().unwrap();
+    let (status, err) = run_to_end(&["run", "tests/scenes/dem_small_2d.toml", "--out", out_s, "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    std::fs::remove_file(dir.join("summary.json")).unwrap();
+    let (status, err) = run_to_end(&["resume", dir.to_str().unwrap(), "--quiet"]);
+    assert_eq!(status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("no complete checkpoint") && err.contains("--checkpoint-every"),
+        "{err}"
+    );
+
+    let (status, err) = run_to_end(&[
+        "run",
+        "tests/scenes/hybrid_adaptive_2d.toml",
+        "--out",
+        out_s,
+        "--quiet",
+        "--checkpoint-every",
+        "10",
+    ]);
+    assert_eq!(status.code(), Some(2), "{err}");
+    assert!(err.contains("output.checkpoint_every") && err.contains("moving zones"), "{err}");
+    std::fs::remove_dir_all(&out).unwrap();
+}
