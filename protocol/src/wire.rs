@@ -167,6 +167,15 @@ pub enum Zone {
     Discrete = 2,
 }
 
+impl Zone {
+    /// The zone of a wire code (`ZoneCell::zone`).
+    pub fn from_code(code: u32) -> Option<Zone> {
+        [Zone::Continuum, Zone::Hybrid, Zone::Discrete]
+            .into_iter()
+            .find(|&z| z as u32 == code)
+    }
+}
+
 wire_type! {
     /// A grain to create (oracle → DEM). 64 bytes.
     "grains.SpawnGrain.v1",

@@ -150,7 +150,7 @@ impl ZoneField {
                     zones[i - 1].cell
                 ));
             }
-            if zone_of_code(z.zone).is_none() {
+            if Zone::from_code(z.zone).is_none() {
                 return Err(format!("zone cell {i}: zone code {} is not 0, 1 or 2", z.zone));
             }
         }
@@ -173,7 +173,7 @@ impl ZoneField {
             return Zone::Discrete;
         };
         match self.zones.binary_search_by_key(&cell, |z| z.cell) {
-            Ok(i) => zone_of_code(self.zones[i].zone).unwrap_or(Zone::Discrete),
+            Ok(i) => Zone::from_code(self.zones[i].zone).unwrap_or(Zone::Discrete),
             Err(_) => Zone::Discrete,
         }
     }
@@ -187,14 +187,14 @@ impl ZoneField {
     pub fn dense(&self) -> Vec<Zone> {
         let mut out = vec![Zone::Discrete; self.cells.nodes.iter().product::<u64>() as usize];
         for z in &self.zones {
-            out[z.cell as usize] = zone_of_code(z.zone).unwrap_or(Zone::Discrete);
+            out[z.cell as usize] = Zone::from_code(z.zone).unwrap_or(Zone::Discrete);
         }
         out
     }
 
     /// Number of listed cells in `zone`.
     pub fn count(&self, zone: Zone) -> usize {
-        self.zones.iter().filter(|z| zone_of_code(z.zone) == Some(zone)).count()
+        self.zones.iter().filter(|z| Zone::from_code(z.zone) == Some(zone)).count()
     }
 }
 
@@ -220,13 +220,6 @@ fn bounds(scene: &Scene, body: &Body) -> ([f64; 3], [f64; 3]) {
             (lo, hi)
         }
     }
-}
-
-/// The zone of a wire code (`ZoneCell::zone`).
-fn zone_of_code(code: u32) -> Option<Zone> {
-    [Zone::Continuum, Zone::Hybrid, Zone::Discrete]
-        .into_iter()
-        .find(|&z| z as u32 == code)
 }
 
 #[cfg(test)]

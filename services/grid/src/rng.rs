@@ -19,7 +19,7 @@ pub fn splitmix64(x: u64) -> u64 {
 }
 
 /// A small deterministic generator (SplitMix64).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Rng(u64);
 
 impl Rng {

@@ -36,19 +36,6 @@ pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneErr
         field: Some(field.into()),
         message,
     };
-    if let Some(o) = scene.oracle.as_ref().filter(|o| o.kind.adaptive())
-        && scene.output.checkpoint_every > 0
-    {
-        return Err(err(
-            "output.checkpoint_every",
-            format!(
-                "checkpoints do not cover moving zones yet (oracle.kind = \"{}\" every {} steps): the oracle's and the solvers' epoch state \
-                 is not saved; use fixed zones or run without checkpoints",
-                format!("{:?}", o.kind).to_lowercase(),
-                o.every
-            ),
-        ));
-    }
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
         Some(kind @ (OracleKind::Surface | OracleKind::Layered)) => {
@@ -148,6 +135,10 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         n_nodes: field.count(Zone::Hybrid) as u64,
         ..SolverReport::default()
     };
+    if let (Some(r), Some(e)) = (&opts.resume, &mut epochs) {
+        e.state
+            .restore(&grains_service::checkpoint::read(r, Role::Oracle, scene.hash)?, &mut report)?;
+    }
     let mut compute = field_time;
     loop {
         let wait_start = Instant::now();
@@ -167,9 +158,11 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
             wait += w;
             compute += c;
         }
-        // Fixed zones carry nothing from one step to the next (adaptive ones are refused
-        // checkpoints before the run starts, `check_scene`).
-        opts.checkpoint(scene, Role::Oracle, window.step, || Ok(Vec::new()))?;
+        // Fixed zones carry nothing from one step to the next.
+        opts.checkpoint(scene, Role::Oracle, window.step, || match &epochs {
+            Some(e) => e.state.save(&report),
+            None => Ok(Vec::new()),
+        })?;
         publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
         compute = Duration::ZERO;
     }
@@ -231,6 +224,29 @@ impl OracleState {
             next_ids: (0, 0),
             rng: grains_grid::rng::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
         })
+    }
+
+    /// What a checkpoint holds of the oracle: the zones, the next ids, the generator, and
+    /// the counts its summary reports between epochs.
+    pub fn save(&self, report: &SolverReport) -> anyhow::Result<Vec<u8>> {
+        let zones: Vec<u32> = self.zones.iter().map(|z| *z as u32).collect();
+        grains_service::checkpoint::encode(&(zones, self.next_ids, &self.rng, report.n_items, report.n_nodes))
+    }
+
+    /// Takes back the state of [`OracleState::save`] (and the summary's counts).
+    pub fn restore(&mut self, bytes: &[u8], report: &mut SolverReport) -> anyhow::Result<()> {
+        type Saved = (Vec<u32>, (u64, u64), grains_grid::rng::Rng, u64, u64);
+        let (zones, next_ids, rng, n_items, n_nodes): Saved = grains_service::checkpoint::decode(bytes)?;
+        if zones.len() != self.zones.len() {
+            anyhow::bail!("the checkpoint has {} zone cells, this scene {}", zones.len(), self.zones.len());
+        }
+        self.zones = zones
+            .into_iter()
+            .map(|z| Zone::from_code(z).ok_or_else(|| anyhow::anyhow!("zone code {z} in the checkpoint")))
+            .collect::<anyhow::Result<_>>()?;
+        (self.next_ids, self.rng) = (next_ids, rng);
+        (report.n_items, report.n_nodes) = (n_items, n_nodes);
+        Ok(())
     }
 
     /// One epoch at `time` over the DEM's grains and stress and the MPM's points.
