@@ -32,13 +32,13 @@ pub enum Cmd {
         #[command(flatten)]
         remote: Remote,
     },
-    /// Send a command to a run through its bridge: pause, resume, stop, snapshot, or
-    /// `set KEY VALUE`; prints the step at which it took effect, or why it was refused.
+    /// Send a command to a run through its bridge: pause, resume, stop, snapshot, checkpoint,
+    /// or `set KEY VALUE`; prints the step at which it took effect, or why it was refused.
     Steer {
         /// Run id (see `grains runs`).
         #[arg(long)]
         run: String,
-        /// pause | resume | stop | snapshot | set KEY VALUE
+        /// pause | resume | stop | snapshot | checkpoint | set KEY VALUE
         #[arg(required = true, num_args = 1..=3, allow_hyphen_values = true)]
         command: Vec<String>,
         #[command(flatten)]

@@ -43,6 +43,9 @@ pub fn physics_columns(csv: &str) -> String {
     std::iter::once(header).chain(lines).map(pick).collect::<Vec<_>>().join("\n")
 }
 
+/// How many of the last rows [`MetricsWriter`] remembers for a late `checkpoint` acknowledgement.
+const RECENT_ROWS: usize = 1024;
+
 /// The header of a run with `roles`.
 pub fn header(roles: &[Role]) -> Vec<String> {
     let mut header = vec!["step".to_string(), "time".to_string()];
@@ -77,6 +80,11 @@ pub struct MetricsWriter {
     pub checkpoint_rows: Vec<(u64, f64, u64, f64)>,
     /// `output.checkpoint_every` and `run.steps` of the run (0: no checkpoints).
     checkpoints: (u64, u64),
+    /// Checkpoints asked for by a command, whose rows are not written yet.
+    asked: Vec<u64>,
+    /// The last rows written, as `checkpoint_rows` lists them (an acknowledgement of a
+    /// `checkpoint` command may be read after its step's row is written).
+    recent: std::collections::VecDeque<(u64, f64, u64, f64)>,
 }
 
 impl MetricsWriter {
@@ -114,12 +122,23 @@ impl MetricsWriter {
             last: None,
             checkpoint_rows: Vec::new(),
             checkpoints: (0, 0),
+            asked: Vec::new(),
+            recent: std::collections::VecDeque::new(),
         }
     }
 
     /// The rows of the run's checkpoint steps are listed in `checkpoint_rows`.
     pub fn checkpoint_at(&mut self, every: u64, steps: u64) {
         self.checkpoints = (every, steps);
+    }
+
+    /// A checkpoint after `step` too (a `checkpoint` command's).
+    pub fn checkpoint_also(&mut self, step: u64) {
+        match self.recent.iter().find(|r| r.0 == step) {
+            Some(row) => self.checkpoint_rows.push(*row),
+            None if step >= self.next_step => self.asked.push(step),
+            None => tracing::warn!("a checkpoint after step {step} was asked for too late to record"),
+        }
     }
 
     /// Every row written so far on disk, synced (before a checkpoint's manifest names them).
@@ -181,9 +200,16 @@ impl MetricsWriter {
         self.out.write_all(line.as_bytes())?;
         self.bytes += line.len() as u64;
         self.last = Some((first.step, first.time));
-        if grains_service::checkpoint::due_at(self.checkpoints.0, self.checkpoints.1, first.step) {
-            self.checkpoint_rows.push((first.step, first.time, self.bytes, wall));
+        let row = (first.step, first.time, self.bytes, wall);
+        let asked = self.asked.contains(&first.step);
+        if asked || grains_service::checkpoint::due_at(self.checkpoints.0, self.checkpoints.1, first.step) {
+            self.asked.retain(|s| *s != first.step);
+            self.checkpoint_rows.push(row);
         }
+        if self.recent.len() == RECENT_ROWS {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(row);
         Ok(())
     }
 

@@ -40,7 +40,10 @@ pub fn command_json(words: &[String]) -> anyhow::Result<String> {
             let v: f64 = value.parse().map_err(|_| anyhow::anyhow!("set {key}: {value:?} is not a number"))?;
             Ok(serde_json::json!({ "command": "set", "key": key, "value": v }).to_string())
         }
-        _ => anyhow::bail!("expected pause, resume, stop, snapshot or set KEY VALUE; got {:?}", words.join(" ")),
+        _ => anyhow::bail!(
+            "expected pause, resume, stop, snapshot, checkpoint or set KEY VALUE; got {:?}",
+            words.join(" ")
+        ),
     }
 }
 

@@ -119,6 +119,9 @@ wire_type! {
 
 /// [`StepBegin::flags`]: the run is over; do not step, finish and exit 0.
 pub const STEP_STOP: u32 = 1;
+/// [`StepBegin::flags`]: write a checkpoint after this step (a `checkpoint` command), as on
+/// the scene's own checkpoint steps.
+pub const STEP_CHECKPOINT: u32 = 2;
 
 wire_type! {
     /// One grid node of a sparse raster (DEM or MPM → coupler). 40 bytes.
@@ -313,10 +316,19 @@ pub enum Command {
     Stop = 3,
     Snapshot = 4,
     Set = 5,
+    /// Checkpoint after the next step (the time owner flags that step's begin).
+    Checkpoint = 6,
 }
 
 impl Command {
-    pub const ALL: [Command; 5] = [Command::Pause, Command::Resume, Command::Stop, Command::Snapshot, Command::Set];
+    pub const ALL: [Command; 6] = [
+        Command::Pause,
+        Command::Resume,
+        Command::Stop,
+        Command::Snapshot,
+        Command::Set,
+        Command::Checkpoint,
+    ];
 
     pub fn from_code(code: u32) -> Option<Command> {
         Command::ALL.into_iter().find(|c| *c as u32 == code)
@@ -330,6 +342,7 @@ impl Command {
             Command::Stop => "stop",
             Command::Snapshot => "snapshot",
             Command::Set => "set",
+            Command::Checkpoint => "checkpoint",
         }
     }
 }

@@ -308,6 +308,60 @@ fn access_control_lets_in_only_the_listed_users() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// Issue 25: `checkpoint` makes every participant checkpoint after the step that follows the
+/// acknowledged one, in a DEM run (the DEM owns time) and in a hybrid run (the coupler flags
+/// that step's begin to the solvers and the oracle); the run killed after it resumes from
+/// it to the uninterrupted run's physics and frames.
+#[test]
+fn a_checkpoint_command_checkpoints_after_the_next_step_and_the_run_resumes_from_it() {
+    let _machine = machine();
+    let out = out_dir("bridge-checkpoint");
+    let out_s = out.to_str().unwrap();
+    for (scene, steps) in [(SCENE, "run.steps=4000"), ("tests/scenes/hybrid_small_2d.toml", "run.steps=12000")] {
+        let common = ["--out", out_s, "--quiet", "--set", steps, "--set", "output.frames_every=1000"];
+        let mut args = vec!["run", scene];
+        args.extend(common);
+        let mut whole = Running::grains(&args);
+        assert!(whole.wait_exit(Duration::from_secs(120)).success(), "{}", whole.stderr());
+        let whole = super::restart::outputs(&run_dir(&whole.stderr()));
+
+        let connect = free_endpoint();
+        let ep = endpoint(&connect, None);
+        args.extend(["--bridge", "--bridge-listen", &connect, "--steering"]);
+        let mut launcher = Running::grains(&args);
+        let err = launcher.wait_for("started the bridge", Duration::from_secs(60));
+        let (run, dir) = (run_id(&err), run_dir(&err));
+        wait_reachable(&ep, &run, &launcher);
+        let send = |c: &str| {
+            steer(&ep, &run, c.as_bytes())
+                .expect("an answer")
+                .unwrap_or_else(|e| panic!("{c}: {e}"))
+        };
+        send(r#"{"command":"pause"}"#);
+        let a = send(r#"{"command":"checkpoint"}"#)["step"].as_u64().expect("step");
+        send(r#"{"command":"resume"}"#);
+        let manifest = dir.join(format!("checkpoints/{:010}/manifest.json", a + 1));
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while !manifest.exists() {
+            assert!(
+                Instant::now() < deadline,
+                "{scene}: no checkpoint after step {}: {}",
+                a + 1,
+                launcher.stderr()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        launcher.child.kill().expect("SIGKILL the launcher");
+        let _ = launcher.child.wait();
+        std::thread::sleep(Duration::from_millis(500));
+        let mut resume = Running::grains(&["resume", dir.to_str().unwrap(), "--quiet"]);
+        assert!(resume.wait_exit(Duration::from_secs(120)).success(), "{scene}: {}", resume.stderr());
+        assert_eq!(summary(&dir)["resumed_after_step"].as_u64(), Some(a + 1), "{scene}");
+        super::restart::assert_same(&super::restart::outputs(&dir), &whole, scene);
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 /// `snapshot` writes a frame at the acknowledged step, in a DEM run (the DEM owns time) and in
 /// a hybrid run (the coupler forwards it to both solvers); `set gravity.y` turns gravity
 /// upward from the acknowledged step on: the grains' momentum then grows upward.

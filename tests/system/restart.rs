@@ -9,13 +9,13 @@ use std::time::{Duration, Instant};
 
 /// The physics of a finished run: `metrics.csv` without its timings, every frame's bytes
 /// (by file name), and `walls.csv` if there is one.
-struct Outputs {
+pub(crate) struct Outputs {
     metrics: String,
     frames: Vec<(String, Vec<u8>)>,
     walls: Option<String>,
 }
 
-fn outputs(dir: &Path) -> Outputs {
+pub(crate) fn outputs(dir: &Path) -> Outputs {
     let metrics = grains_launch::metrics::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
     let mut frames: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir.join("frames"))
         .unwrap()
@@ -28,6 +28,17 @@ fn outputs(dir: &Path) -> Outputs {
         frames,
         walls: std::fs::read_to_string(dir.join("walls.csv")).ok(),
     }
+}
+
+/// The resumed run's outputs are the uninterrupted run's (`what` names the case).
+pub(crate) fn assert_same(resumed: &Outputs, whole: &Outputs, what: &str) {
+    assert_eq!(resumed.metrics, whole.metrics, "{what}: metrics differ after the resume");
+    let names = |o: &Outputs| o.frames.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
+    assert_eq!(names(resumed), names(whole), "{what}: other frames");
+    for ((name, a), (_, b)) in resumed.frames.iter().zip(&whole.frames) {
+        assert!(a == b, "{what}: frame {name} differs after the resume");
+    }
+    assert_eq!(resumed.walls, whole.walls, "{what}: walls.csv differs after the resume");
 }
 
 fn refs(a: &[String]) -> Vec<&str> {
@@ -100,14 +111,7 @@ fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
             after >= every as u64 && (after as usize) < rows,
             "{scene}: resumed after step {after}, killed at row {rows}: rows after the checkpoint were there to drop"
         );
-        let resumed = outputs(&dir);
-        assert_eq!(resumed.metrics, whole.metrics, "{scene}: metrics differ after the resume");
-        let names = |o: &Outputs| o.frames.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
-        assert_eq!(names(&resumed), names(&whole), "{scene}: other frames");
-        for ((name, a), (_, b)) in resumed.frames.iter().zip(&whole.frames) {
-            assert!(a == b, "{scene}: frame {name} differs after the resume");
-        }
-        assert_eq!(resumed.walls, whole.walls, "{scene}: walls.csv differs after the resume");
+        assert_same(&outputs(&dir), &whole, scene);
 
         // A completed run has nothing to resume.
         let (status, err) = run_to_end(&["resume", dir.to_str().unwrap(), "--quiet"]);

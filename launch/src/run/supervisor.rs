@@ -310,6 +310,9 @@ impl<'a, T: Transport> Supervisor<'a, T> {
                 Command::Stop => self.stopped_at = Some(a.step),
                 Command::Pause => self.paused = true,
                 Command::Resume => self.paused = false,
+                // The time owner flags the next step's begin: every participant checkpoints
+                // after it.
+                Command::Checkpoint => self.metrics.checkpoint_also(a.step + 1),
                 Command::Snapshot | Command::Set => {}
             }
             if announce {
@@ -319,6 +322,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
                     Command::Stop => "stopping on a control command",
                     Command::Snapshot => "snapshot (frames) by a control command",
                     Command::Set => "a parameter set by a control command",
+                    Command::Checkpoint => "a checkpoint after the next step asked by a control command",
                 };
                 tracing::info!("{what} after step {}", a.step);
             }

@@ -2,7 +2,7 @@
 //! reaches the run. A command that fails here is answered with the reason and changes nothing.
 //!
 //! ```json
-//! {"command": "pause"}            // also "resume", "stop", "snapshot"
+//! {"command": "pause"}            // also "resume", "stop", "snapshot", "checkpoint"
 //! {"command": "set", "key": "gravity.y", "value": -9.81}
 //! {"command": "set", "key": "wall.0.velocity.x", "value": 0.05}
 //! ```

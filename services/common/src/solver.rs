@@ -7,8 +7,8 @@ use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{
-    Ack, AckStatus, Command, Control, EpochItem, NodeStress, NodeVelocity, Param, PointScale, RasterNode, STEP_STOP, SpawnGrain,
-    SpawnPoint, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
+    Ack, AckStatus, Command, Control, EpochItem, NodeStress, NodeVelocity, Param, PointScale, RasterNode, STEP_CHECKPOINT, STEP_STOP,
+    SpawnGrain, SpawnPoint, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
 };
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -24,6 +24,8 @@ pub struct StepWindow {
     /// DEM substeps per macro-step: the time owner's (the coupler's `StepBegin`, or the
     /// scene's `coupling.substeps` for a DEM that runs alone), the DEM's one source of them.
     pub substeps: u32,
+    /// A `checkpoint` command asked for a checkpoint after this step.
+    pub checkpoint: bool,
 }
 
 impl StepWindow {
@@ -34,6 +36,7 @@ impl StepWindow {
             time: (step - 1) as f64 * scene.dt,
             dt: scene.dt,
             substeps: scene.coupling.substeps,
+            checkpoint: false,
         }
     }
 }
@@ -325,20 +328,22 @@ impl ParticipantOptions {
         self.resume.as_ref().map_or(0, |r| r.step)
     }
 
-    /// Writes this participant's checkpoint after `step` if one is due (before its summary
-    /// of the step: the launcher counts a checkpoint complete once it has every summary).
+    /// Writes this participant's checkpoint after `window`'s step if one is due there or
+    /// was asked for (before its summary of the step: the launcher counts a checkpoint
+    /// complete once it has every summary).
     pub fn checkpoint(
         &self,
         scene: &Scene,
         role: Role,
-        step: u64,
+        window: &StepWindow,
         payload: impl FnOnce() -> anyhow::Result<Vec<u8>>,
     ) -> anyhow::Result<()> {
-        if !crate::checkpoint::due(scene, step) {
+        let step = window.step;
+        if !crate::checkpoint::due(scene, step) && !window.checkpoint {
             return Ok(());
         }
         let Some(dir) = &self.out_dir else {
-            bail!("output.checkpoint_every is set, but this participant has no output directory (--out-dir) to write checkpoints in");
+            bail!("a checkpoint is due after step {step}, but this participant has no output directory (--out-dir) to write it in");
         };
         crate::checkpoint::write(dir, role, scene.hash, step, &payload()?)?;
         Ok(())
@@ -485,7 +490,7 @@ impl<T: Transport> CoupledPorts<T> {
             compute += t.elapsed();
         }
 
-        opts.checkpoint(scene, session.role, window.step, || solver.save())?;
+        opts.checkpoint(scene, session.role, window, || solver.save())?;
         let mut report = solver.report();
         report.checksum = sent_checksum;
         publish_summary(session, &mut self.summary_pub, window, &report, compute, wait)?;
@@ -584,6 +589,7 @@ pub fn next_step<T: Transport>(
         time: h.time,
         dt: h.dt,
         substeps: b.substeps,
+        checkpoint: b.flags & STEP_CHECKPOINT != 0,
     }))
 }
 
@@ -600,11 +606,18 @@ fn run_alone<T: Transport, S: Solver>(
     session.ready()?;
     let mut viewer = Viewer::open(session)?;
     for step in opts.start_after() + 1..=scene.steps {
-        let go_on = clock.obey(session, step - 1, |c| match solver.command(step - 1, c) {
-            Ok(()) => AckStatus::Applied,
-            Err(why) => {
-                tracing::warn!("command {} refused: {why}", c.command);
-                AckStatus::Unsupported
+        let mut checkpoint = false;
+        let go_on = clock.obey(session, step - 1, |c| {
+            if Command::from_code(c.command) == Some(Command::Checkpoint) {
+                checkpoint = opts.out_dir.is_some();
+                return if checkpoint { AckStatus::Applied } else { AckStatus::Unsupported };
+            }
+            match solver.command(step - 1, c) {
+                Ok(()) => AckStatus::Applied,
+                Err(why) => {
+                    tracing::warn!("command {} refused: {why}", c.command);
+                    AckStatus::Unsupported
+                }
             }
         })?;
         if !go_on {
@@ -612,11 +625,14 @@ fn run_alone<T: Transport, S: Solver>(
         }
         session.watch_peers()?;
         crate::telemetry::set_step(Some(step));
-        let window = StepWindow::of(scene, step);
+        let window = StepWindow {
+            checkpoint,
+            ..StepWindow::of(scene, step)
+        };
         let t = Instant::now();
         solver.step_alone(&window)?;
         let compute = t.elapsed();
-        opts.checkpoint(scene, session.role, step, || solver.save())?;
+        opts.checkpoint(scene, session.role, &window, || solver.save())?;
         publish_summary(session, &mut summary_pub, &window, &solver.report(), compute, Duration::ZERO)?;
         if let Some(v) = &mut viewer {
             v.offer(session, &window, &*solver)?;
@@ -682,7 +698,7 @@ impl<T: Transport> RunClock<T> {
     }
 
     /// Applies pending control commands after macro-step `done`, acknowledging each
-    /// (`snapshot` and `set` through `apply`); while paused, blocks on the control service
+    /// (`snapshot`, `set` and `checkpoint` through `apply`); while paused, blocks on the control service
     /// (with liveness checks). Returns `false` when the run must stop before the next step.
     pub fn obey(&mut self, session: &Session<'_, T>, done: u64, mut apply: impl FnMut(&Control) -> AckStatus) -> anyhow::Result<bool> {
         loop {
@@ -691,7 +707,7 @@ impl<T: Transport> RunClock<T> {
                 Some(Some(c)) => {
                     let status = match Command::from_code(c.command) {
                         Some(Command::Stop | Command::Pause | Command::Resume) => AckStatus::Applied,
-                        Some(Command::Snapshot | Command::Set) => apply(&c),
+                        Some(Command::Snapshot | Command::Set | Command::Checkpoint) => apply(&c),
                         None => AckStatus::UnknownCommand,
                     };
                     let header = session.header(done, 0.0, 0.0);

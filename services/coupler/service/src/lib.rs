@@ -7,7 +7,9 @@
 
 use anyhow::bail;
 use grains_protocol::names;
-use grains_protocol::wire::{AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_STOP, StepBegin, StepHeader, Summary};
+use grains_protocol::wire::{
+    AckStatus, Command, Control, NodeVelocity, Param, RasterNode, STEP_CHECKPOINT, STEP_STOP, StepBegin, StepHeader, Summary,
+};
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_service::session::Session;
 use grains_service::solver::{ParticipantOptions, RunClock, SolverReport, StepWindow, join, publish_summary, set_component};
@@ -31,16 +33,19 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     for step in last + 1..=scene.steps {
         session.watch_peers()?;
         grains_service::telemetry::set_step(Some(step));
-        if !ports.obey(&session, scene, step)? {
+        if !ports.obey(&session, scene, opts, step)? {
             break;
         }
-        let window = StepWindow::of(scene, step);
+        let window = StepWindow {
+            checkpoint: std::mem::take(&mut ports.checkpoint_next),
+            ..StepWindow::of(scene, step)
+        };
         let header = session.header(step, window.time, window.dt);
         ports.begin_step(header, &window, opts.checksums)?;
         let wait_start = Instant::now();
         let (report, compute) = ports.couple(&session, step, header, opts.checksums)?;
         let wait = wait_start.elapsed() - compute;
-        opts.checkpoint(scene, Role::Coupler, step, || Ok(Vec::new()))?;
+        opts.checkpoint(scene, Role::Coupler, &window, || Ok(Vec::new()))?;
         publish_summary(&session, &mut ports.summary_pub, &window, &report, compute, wait)?;
         last = step;
     }
@@ -58,6 +63,8 @@ struct Ports<T: Transport> {
     /// Commands forwarded to the solvers.
     command_pub: T::Publisher<Control, StepHeader>,
     clock: RunClock<T>,
+    /// A `checkpoint` command was accepted: the next step begin says so.
+    checkpoint_next: bool,
 }
 
 impl<T: Transport> Ports<T> {
@@ -77,6 +84,7 @@ impl<T: Transport> Ports<T> {
             dem_sub,
             command_pub,
             clock,
+            checkpoint_next: false,
         })
     }
 
@@ -94,13 +102,23 @@ impl<T: Transport> Ports<T> {
     /// The control commands before `step`, acknowledged at step − 1. Snapshot and set act on
     /// the solvers' state: checked here ([`accepts`]), carried out by both solvers before the
     /// next step. Returns `false` when the run must stop.
-    fn obey(&mut self, session: &Session<'_, T>, scene: &Scene, step: u64) -> anyhow::Result<bool> {
+    fn obey(&mut self, session: &Session<'_, T>, scene: &Scene, opts: &ParticipantOptions, step: u64) -> anyhow::Result<bool> {
         let command_pub = &mut self.command_pub;
+        let checkpoint_next = &mut self.checkpoint_next;
         let mut forward = Ok(());
         // The solvers read forwarded commands only at the next step begin: never more than
         // the service holds, or the coupler would wait for them while they wait for it.
         let mut forwarded = 0;
         let go_on = self.clock.obey(session, step - 1, |c| {
+            // Every participant checkpoints after the next step: its begin carries the flag.
+            if Command::from_code(c.command) == Some(Command::Checkpoint) {
+                *checkpoint_next = opts.out_dir.is_some();
+                return if *checkpoint_next {
+                    AckStatus::Applied
+                } else {
+                    AckStatus::Unsupported
+                };
+            }
             if !accepts(scene, c) {
                 return AckStatus::Unsupported;
             }
@@ -127,7 +145,7 @@ impl<T: Transport> Ports<T> {
         self.step_pub.publish(1, |h, out| {
             *h = header;
             out[0] = StepBegin {
-                flags: 0,
+                flags: if window.checkpoint { STEP_CHECKPOINT } else { 0 },
                 substeps: window.substeps,
             };
             if checksums {

@@ -159,7 +159,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
             compute += c;
         }
         // Fixed zones carry nothing from one step to the next.
-        opts.checkpoint(scene, Role::Oracle, window.step, || match &epochs {
+        opts.checkpoint(scene, Role::Oracle, &window, || match &epochs {
             Some(e) => e.state.save(&report),
             None => Ok(Vec::new()),
         })?;
