@@ -370,9 +370,7 @@ fn printed_command(launcher: &mut Running, role: &str) -> String {
 /// (`<bin>/grains-<role> --scene … --run-id … --out-dir …`), as the shell reads them, from
 /// another directory; waits for its success.
 fn run_python_external(python: &Path, module: &str, printed: &str, launcher: &Running) {
-    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
-    let command = format!("cd / && exec '{}' -m {module}{arguments}", python.display());
-    let mut external = Running::start(Path::new("sh"), &["-c", &command]);
+    let mut external = start_python_external(python, module, printed);
     let status = external.wait_exit(LONG);
     assert!(
         status.success(),
@@ -380,6 +378,80 @@ fn run_python_external(python: &Path, module: &str, printed: &str, launcher: &Ru
         external.stderr(),
         launcher.stderr()
     );
+}
+
+/// [`run_python_external`] without the wait.
+fn start_python_external(python: &Path, module: &str, printed: &str) -> Running {
+    let arguments = &printed[printed.find(" --scene ").unwrap_or_else(|| panic!("{printed}"))..];
+    let command = format!("cd / && exec '{}' -m {module}{arguments}", python.display());
+    Running::start(Path::new("sh"), &["-c", &command])
+}
+
+/// protocol/README.md §6.4 from the spec alone: the Python coupler (the time owner) and the
+/// Python MPM (its points, time, gravity and walls in its own payload) write checkpoints; a
+/// run of both with the built-in DEM and oracle, its launcher killed after a checkpoint, is
+/// resumed with both started again from the printed commands (`--resume`), and ends with the
+/// physics columns and the DEM's frames of the run that never stopped, byte for byte.
+#[test]
+fn python_participants_checkpoint_and_resume_from_the_spec() {
+    let python = python();
+    let _machine = machine();
+    let out = out_dir("python-checkpoint");
+    let out_s = out.to_str().unwrap();
+    let mut args = vec!["run", "tests/scenes/hybrid_small_2d.toml", "--out", out_s, "--quiet"];
+    args.extend([
+        "--set",
+        "run.steps=600",
+        "--set",
+        "output.frames_every=100",
+        "--checkpoint-every",
+        "200",
+    ]);
+    args.extend(["--external", "coupler", "--external", "mpm"]);
+    let start = |launcher: &mut Running| {
+        let coupler = printed_command(launcher, "coupler");
+        let mpm = printed_command(launcher, "mpm");
+        [
+            start_python_external(&python, "grains_participants.coupler", &coupler),
+            start_python_external(&python, "grains_participants.mpm", &mpm),
+        ]
+    };
+    let mut whole = Running::grains(&args);
+    let externals = start(&mut whole);
+    assert!(whole.wait_exit(LONG).success(), "{}", whole.stderr());
+    for mut e in externals {
+        assert!(e.wait_exit(LONG).success(), "{}", e.stderr());
+    }
+    let whole = restart::outputs(&run_dir(&whole.stderr()));
+
+    let mut launcher = Running::grains(&args);
+    let externals = start(&mut launcher);
+    let dir = run_dir(&launcher.stderr());
+    let deadline = Instant::now() + LONG;
+    while !dir.join("checkpoints/0000000200/manifest.json").exists() {
+        assert!(Instant::now() < deadline, "no checkpoint: {}", launcher.stderr());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    launcher.child.kill().expect("SIGKILL the launcher");
+    let _ = launcher.child.wait();
+    for mut e in externals {
+        // They see the launcher's node dead and stop (exit 1).
+        let _ = e.wait_exit(Duration::from_secs(30));
+    }
+    let dir_s = dir.to_str().unwrap();
+    let mut resumed = Running::grains(&["resume", dir_s, "--quiet", "--external", "coupler", "--external", "mpm"]);
+    let externals = start(&mut resumed);
+    for role in ["coupler", "mpm"] {
+        assert!(printed_command(&mut resumed, role).contains("--resume"), "{}", resumed.stderr());
+    }
+    assert!(resumed.wait_exit(LONG).success(), "{}", resumed.stderr());
+    for mut e in externals {
+        assert!(e.wait_exit(LONG).success(), "{}", e.stderr());
+    }
+    assert_eq!(summary(&dir)["resumed_after_step"].as_u64(), Some(200));
+    assert_external(&dir, "mpm");
+    restart::assert_same(&restart::outputs(&dir), &whole, "Python coupler and MPM");
+    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// The run's summary lists `role` as external.

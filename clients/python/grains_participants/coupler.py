@@ -15,7 +15,8 @@ What each part implements, in protocol/README.md:
 - `Coupler.obey` / `accepts`: §3.8 (control commands, acknowledgements, forwarding);
 - `Coupler.begin_step`, `Coupler.stop`: §3.4 (`StepBegin` and the STOP message);
 - `Coupler.couple` / `constrain`: §3.5, §3.6 (rasters in, constrained velocities out) and
-  the coupler's summary of §3.7.
+  the coupler's summary of §3.7;
+- `checkpoint` (module): §6.4 (its empty checkpoint; a resumed run starts after it).
 """
 
 import ctypes
@@ -24,7 +25,7 @@ import time
 
 import numpy as np
 
-from . import wire
+from . import checkpoint, wire
 from . import participant
 from .participant import POLL, Halt
 
@@ -93,6 +94,8 @@ class Coupler:
         self.p = participant
         self.scene = scene
         self.paused = False
+        #: A `checkpoint` command was applied: the next step begin carries STEP_CHECKPOINT.
+        self.checkpoint_next = False
 
     def open_ports(self):
         """§5: every service of the coupler (in the order the built-in one opens them)."""
@@ -127,16 +130,20 @@ class Coupler:
         self.open_ports()
         p.wait_until("the DEM, the MPM, the oracle and the launcher", self.connected)
         p.ready()
-        last = 0
-        for step in range(1, scene.steps + 1):
+        last = p.resume_step  # §6.4: a resumed run goes on after its checkpoint
+        for step in range(last + 1, scene.steps + 1):
             p.watch_peers()
             if not self.obey(step):
                 break
             start = (step - 1) * scene.dt  # a product, never a running sum (§6.1)
-            self.begin_step(step, start)
+            asked, self.checkpoint_next = self.checkpoint_next, False
+            self.begin_step(step, start, asked)
             wait_start = time.perf_counter_ns()
             report, compute_ns = self.couple(step, start)
             wait_ns = time.perf_counter_ns() - wait_start - compute_ns
+            if checkpoint.due(scene, step, asked):
+                # A coupler carries nothing from step to step: an empty payload (§6.4).
+                checkpoint.write(p.out_dir, wire.COUPLER, p.scene_hash, step, b"")
             self.publish_summary(step, start, report, compute_ns, wait_ns)
             last = step
         self.stop(last)
@@ -161,6 +168,10 @@ class Coupler:
                 continue
             if c.command in (wire.STOP, wire.PAUSE, wire.RESUME):
                 status = wire.ACK_APPLIED
+            elif c.command == wire.CHECKPOINT:
+                # Not forwarded: the next step begin tells every participant (§3.8).
+                self.checkpoint_next = self.p.out_dir is not None
+                status = wire.ACK_APPLIED if self.checkpoint_next else wire.ACK_UNSUPPORTED
             elif c.command in (wire.SNAPSHOT, wire.SET):
                 if not accepts(self.scene, c):
                     status = wire.ACK_UNSUPPORTED
@@ -199,13 +210,15 @@ class Coupler:
 
         self.ack.publish(1, fill)
 
-    def begin_step(self, step, start):
-        """§3.4: step n's begin, with the scene's substeps and (checksums on) its checksum."""
+    def begin_step(self, step, start, checkpoint_after):
+        """§3.4: step n's begin, with the scene's substeps, CHECKPOINT if asked for, and
+        (checksums on) its checksum."""
 
         def fill(h, address):
             self.p.header(h, step, start, self.scene.dt)
             begin = wire.StepBegin.from_address(address)
-            begin.flags, begin.substeps = 0, self.scene.substeps
+            begin.flags = wire.STEP_CHECKPOINT if checkpoint_after else 0
+            begin.substeps = self.scene.substeps
             if self.scene.checksums:
                 h.checksum = wire.checksum(address, ctypes.sizeof(wire.StepBegin))
 

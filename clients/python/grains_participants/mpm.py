@@ -27,7 +27,8 @@ What each part implements, in protocol/README.md:
 - `Solver.predict` / `Mpm.send_raster`: §3.5 (phase 1 and the raster);
 - `Solver.finish`: §3.6 and §6.2 step 4 (constrained velocities, then phase 2);
 - `Mpm.publish_summary`: §3.7 (the solver's summary);
-- `Mpm.offer_view`: §3.8a (the optional view for the bridge).
+- `Mpm.offer_view`: §3.8a (the optional view for the bridge);
+- `Mpm.save` / `Mpm.restore` (with the `checkpoint` module): §6.4 (checkpoints, resuming).
 
 Not supported (refused with exit code 2): an MPM alone (the time owner of an MPM-only run),
 synthetic test scenes, adaptive oracles (`oracle.kind = "surface"` or `"layered"`, §3.10),
@@ -35,6 +36,7 @@ segment and drum walls.
 """
 
 import ctypes
+import io
 import math
 import sys
 import time
@@ -42,7 +44,7 @@ import tomllib
 
 import numpy as np
 
-from . import wire
+from . import checkpoint, wire
 from . import participant
 from .participant import Halt
 from .scene import SceneError
@@ -423,6 +425,8 @@ class Mpm:
         self.ms = ms
         self.gravity = ms.gravity.copy()
         self.last_view = None
+        #: The step in hand asks for a checkpoint after it (STEP_CHECKPOINT, §3.4).
+        self.checkpoint_after = False
 
     def open_ports(self):
         """§5: every service of a coupled MPM (in the order the built-in one opens them)."""
@@ -465,6 +469,8 @@ class Mpm:
         p.wait_until("the coupler, the oracle and the launcher", self.connected)
         zones = self.initial_zones() if self.zones is not None else ZoneField(self.ms, np.zeros(0, wire.ZONE_CELL))
         self.solver = Solver(self.ms, zones)
+        if p.resume_dir is not None:
+            self.restore(checkpoint.read(p.resume_dir, wire.MPM, p.scene_hash, p.resume_step))
         p.ready()
         while True:
             wait_start = time.perf_counter_ns()
@@ -488,6 +494,7 @@ class Mpm:
             window = (h.step, h.time, h.dt)
         finally:
             sample.delete()
+        self.checkpoint_after = bool(b.flags & wire.STEP_CHECKPOINT)
         return None if b.flags & wire.STEP_STOP else window
 
     def step(self, window, wait_ns):
@@ -512,8 +519,35 @@ class Mpm:
         t3 = time.perf_counter_ns()
         wait_ns += t2 - t1
         compute_ns += t3 - t2
+        if checkpoint.due(self.scene, step, self.checkpoint_after):
+            checkpoint.write(self.p.out_dir, wire.MPM, self.p.scene_hash, step, self.save())
         self.publish_summary(window, raster_checksum, compute_ns, wait_ns)
         self.offer_view(window)
+
+    def save(self):
+        """§6.4: this MPM's payload: its points, time, gravity and walls, as numpy's .npz."""
+        s, walls = self.solver, self.ms.walls
+        arrays = {"x": s.x, "v": s.v, "m": s.m, "vol": s.vol, "F": s.F, "C": s.C, "time": np.array(s.time)}
+        arrays["gravity"] = self.gravity
+        for k, w in enumerate(walls):
+            # Velocity, the shift a `set` left (scalar 0 before any), and since when.
+            shift = np.broadcast_to(np.asarray(w.get("shift", 0.0), dtype=float), w["velocity"].shape)
+            arrays[f"wall{k}"] = np.concatenate([w["velocity"], shift, [w["since"]]])
+        out = io.BytesIO()
+        np.savez(out, **arrays)
+        return out.getvalue()
+
+    def restore(self, payload):
+        """The state of `save` back, in a solver just built from the scene."""
+        with np.load(io.BytesIO(payload)) as a:
+            s = self.solver
+            s.x, s.v, s.m, s.vol, s.F, s.C = (a[k].copy() for k in ("x", "v", "m", "vol", "F", "C"))
+            s.time = float(a["time"])
+            self.gravity = a["gravity"].copy()
+            dim = self.ms.dim
+            for k, w in enumerate(self.ms.walls):
+                saved = a[f"wall{k}"]
+                w["velocity"], w["shift"], w["since"] = saved[:dim].copy(), saved[dim : 2 * dim].copy(), float(saved[2 * dim])
 
     def apply_commands(self, step):
         """§3.8: every command the coupler forwarded (its header not read), as after step - 1.

@@ -206,6 +206,11 @@ class Participant:
         #: Seconds each start-up wait may last; None: no limit (§7).
         self.connect_timeout = connect_timeout if connect_timeout > 0 else None
         self.ports = []
+        #: The run's output directory (--out-dir) and, resumed, the checkpoint directory and
+        #: its step (--resume, §6.4); set by `main`.
+        self.out_dir = None
+        self.resume_dir = None
+        self.resume_step = 0
         self._empty_waits = 0
         self._last_dead_check = time.monotonic()
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -423,7 +428,8 @@ def main(role, name, what, prepare, make, argv=None):
     )
     parser.add_argument("--scene", required=True, help="the run's copy of the scene file")
     parser.add_argument("--run-id", required=True, help="the run id the launcher printed")
-    parser.add_argument("--out-dir", help="the run's output directory (these examples write nothing there)")
+    parser.add_argument("--out-dir", help="the run's output directory (checkpoints go under it, §6.4)")
+    parser.add_argument("--resume", help="resume from this checkpoint directory (§6.4)")
     parser.add_argument(
         "--connect-timeout", type=float, default=60.0, help="seconds per start-up wait; 0: no limit"
     )
@@ -440,6 +446,12 @@ def main(role, name, what, prepare, make, argv=None):
     participant = None
     try:
         participant = Participant(role, args.run_id, wire.scene_hash(scene.data), args.connect_timeout)
+        participant.out_dir = args.out_dir
+        if args.resume is not None:
+            from . import checkpoint
+
+            participant.resume_dir = args.resume
+            participant.resume_step = checkpoint.resume_step(args.resume)
         make(participant, scene, prepared).run()
         return 0
     except Halt as e:

@@ -61,5 +61,7 @@ class Scene:
         self.n_walls = len(doc.get("wall", []))
         #: Every physics scene with a coupler has an oracle; a synthetic test scene none (§2).
         self.has_oracle = synthetic is None
+        #: Macro-steps between checkpoints (§6.4); 0: none.
+        self.checkpoint_every = int(doc.get("output", {}).get("checkpoint_every", 0))
         #: Checksums are computed and verified unless `synthetic.checksum = false` (§4).
         self.checksums = synthetic is None or bool(synthetic.get("checksum", True))

@@ -33,13 +33,13 @@ VERDICTS = {
 }
 
 # StepBegin.flags (§3.4).
-STEP_STOP = 1
+STEP_STOP, STEP_CHECKPOINT = 1, 2
 
 # ZoneCell.zone (§3.9).
 ZONE_CONTINUUM, ZONE_HYBRID, ZONE_DISCRETE = 0, 1, 2
 
 # Control.command (§3.8) and Ack.status.
-PAUSE, RESUME, STOP, SNAPSHOT, SET = 1, 2, 3, 4, 5
+PAUSE, RESUME, STOP, SNAPSHOT, SET, CHECKPOINT = 1, 2, 3, 4, 5, 6
 ACK_APPLIED, ACK_UNKNOWN_COMMAND, ACK_UNSUPPORTED, ACK_BUSY = 0, 1, 2, 3
 
 u8, u32, u64, f64 = ctypes.c_uint8, ctypes.c_uint32, ctypes.c_uint64, ctypes.c_double
