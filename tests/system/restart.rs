@@ -135,9 +135,10 @@ fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
-/// A run without checkpoints cannot be resumed; it says why (exit code 2).
+/// A run without checkpoints cannot be resumed, nor one still going (its launcher and
+/// participants hold `run.lock`); both say why (exit code 2).
 #[test]
-fn a_run_without_a_checkpoint_is_not_resumed() {
+fn a_run_without_a_checkpoint_or_still_going_is_not_resumed() {
     let _machine = machine();
     let out = out_dir("restart-refused");
     let out_s = out.to_str().unwrap();
@@ -152,5 +153,29 @@ fn a_run_without_a_checkpoint_is_not_resumed() {
         "{err}"
     );
 
+    let mut running = Running::grains(&[
+        "run",
+        "tests/scenes/dem_small_2d.toml",
+        "--out",
+        out_s,
+        "--quiet",
+        "--set",
+        "run.steps=400000",
+        "--checkpoint-every",
+        "100",
+    ]);
+    let dir = run_dir(&running.wait_for("started as processes", Duration::from_secs(60)));
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !dir.join("checkpoints/0000000100/manifest.json").exists() {
+        assert!(Instant::now() < deadline, "no checkpoint: {}", running.stderr());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (status, err) = run_to_end(&["resume", dir.to_str().unwrap(), "--quiet"]);
+    assert_eq!(status.code(), Some(2), "{err}");
+    assert!(err.contains("still going"), "{err}");
+    assert!(
+        running.child.try_wait().unwrap().is_none(),
+        "the refused resume touched the running run"
+    );
     std::fs::remove_dir_all(&out).unwrap();
 }

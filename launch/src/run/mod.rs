@@ -199,7 +199,7 @@ pub fn new_run_id() -> String {
 /// Runs a scene to the end (or to a failure or Ctrl-C) and writes its outputs; or, with
 /// [`RunOptions::resume`], continues a run from its last complete checkpoint.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
-    let (scene, text, resume) = match &opts.resume {
+    let (scene, text, resume, held) = match &opts.resume {
         None => {
             let (scene, text, chosen) = steps::load(&opts.scene_path, &opts.overrides)?;
             if let Some(c) = chosen
@@ -207,12 +207,14 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             {
                 tracing::info!("{c}");
             }
-            (scene, text, None)
+            (scene, text, None, None)
         }
         Some(dir) => {
             let (scene, text, _) = steps::load(&dir.join("scene.toml"), &[])?;
+            let lock = resume::lock(dir)?;
             let resume = resume::prepare(dir, &scene)?;
-            (scene, text, Some(resume))
+            grains_service::checkpoint::share(&lock).with_context(|| format!("{}: run.lock", dir.display()))?;
+            (scene, text, Some(resume), Some(lock))
         }
     };
     let roles = scene.participants();
@@ -257,6 +259,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         // its outputs; every participant reads this copy.
         write_atomic(&scene_copy, text.as_bytes()).with_context(|| format!("writing {}", scene_copy.display()))?;
     }
+    // Held to the end: a `grains resume` of this directory meanwhile is refused.
+    let _lock = match held {
+        Some(l) => l,
+        None => grains_service::checkpoint::hold(&dir, false)
+            .with_context(|| format!("{}: run.lock", dir.display()))?
+            .with_context(|| format!("{}: run.lock is held exclusively by another grains", dir.display()))?,
+    };
     let scene_path = std::fs::canonicalize(&scene_copy).with_context(|| format!("resolving {}", scene_copy.display()))?;
 
     let started = SystemTime::now();

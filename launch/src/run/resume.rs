@@ -12,6 +12,21 @@ use std::path::{Path, PathBuf};
 /// damaged on disk).
 pub const KEEP: usize = 2;
 
+/// The run directory for this launcher, exclusively: nobody else (a launcher, a participant
+/// of the stopped run still exiting) holds `run.lock` ([`checkpoint::hold`]). Shared once
+/// the directory is ready ([`checkpoint::share`]), for the new participants to hold it too.
+pub fn lock(run_dir: &Path) -> anyhow::Result<std::fs::File> {
+    let path = run_dir.join("run.lock");
+    match checkpoint::hold(run_dir, true).with_context(|| format!("locking {}", path.display()))? {
+        Some(f) => Ok(f),
+        None => bail!(BadInput(format!(
+            "{}: the run is still going (a process of it holds {}: its launcher, or a participant still exiting); stop it first",
+            run_dir.display(),
+            path.display()
+        ))),
+    }
+}
+
 /// A run being resumed.
 #[derive(Clone, Debug)]
 pub struct Resumed {

@@ -8,7 +8,12 @@
 //! complete checkpoint. A resumed participant gets that directory (`--resume DIR`), reads
 //! its own file and continues with the next step as if the run had never stopped.
 //!
-//! A file: the header below (little-endian), then the participant's own payload. Ours are
+//! Every process of a run that writes into its directory — the launcher and the participants
+//! it starts — holds `run.lock` there with a shared `flock` while it runs (the kernel lets go
+//! when the process ends, however it ends); `grains resume` takes it exclusive before it
+//! touches anything, so it refuses a directory that any of them still writes to.
+//!
+//! A file: the header (little-endian), then the participant's own payload. Ours are
 //! serde values in bincode's standard encoding with fixed-width integers; another program
 //! taking a role may put anything in its payload: only it reads it back.
 
@@ -25,6 +30,39 @@ pub const FORMAT: u32 = 1;
 const MAGIC: [u8; 8] = *b"GRAINSCP";
 /// magic, format, role code, scene hash, step, payload length, payload checksum.
 const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 8 + 8;
+
+/// Locks `<run dir>/run.lock` (shared or exclusive) while the returned file is open; `None`
+/// if another process holds it in a way that excludes this.
+pub fn hold(run_dir: &Path, exclusive: bool) -> std::io::Result<Option<std::fs::File>> {
+    use std::os::fd::AsRawFd;
+    let f = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(run_dir.join("run.lock"))?;
+    let how = if exclusive { libc::LOCK_EX } else { libc::LOCK_SH };
+    // SAFETY: flock(2) on a descriptor this function owns.
+    if unsafe { libc::flock(f.as_raw_fd(), how | libc::LOCK_NB) } == 0 {
+        return Ok(Some(f));
+    }
+    let err = std::io::Error::last_os_error();
+    if err.raw_os_error() == Some(libc::EWOULDBLOCK) {
+        Ok(None)
+    } else {
+        Err(err)
+    }
+}
+
+/// An exclusive [`hold`] made shared (once the resumed run may start its participants).
+pub fn share(lock: &std::fs::File) -> std::io::Result<()> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: flock(2) on a descriptor the caller owns.
+    if unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_SH) } == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
 
 /// Whether the participants checkpoint after `step` (never after the last: the run is done).
 pub fn due(scene: &Scene, step: u64) -> bool {

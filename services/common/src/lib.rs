@@ -60,6 +60,11 @@ pub fn participant_main(
     telemetry::init(role.binary());
     let run = || -> anyhow::Result<()> {
         let scene = grains_protocol::scene::load(&args.scene)?;
+        // Held while this process may write into the run's directory (see `checkpoint`).
+        let _held = match &args.out_dir {
+            Some(dir) => checkpoint::hold(dir, false).map_err(|e| anyhow::anyhow!("{}: run.lock: {e}", dir.display()))?,
+            None => None,
+        };
         let stop = signals::StopFlag::with_signals();
         let transport = grains_transport::ipc::Iceoryx2::join(&args.run_id, role.binary(), stop.as_cancel())?;
         let opts = solver::ParticipantOptions {
