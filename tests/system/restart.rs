@@ -177,5 +177,8 @@ fn a_run_without_a_checkpoint_or_still_going_is_not_resumed() {
         running.child.try_wait().unwrap().is_none(),
         "the refused resume touched the running run"
     );
+    // Stopped (and its participants gone) before its directory is removed.
+    drop(running);
+    std::thread::sleep(Duration::from_secs(2));
     std::fs::remove_dir_all(&out).unwrap();
 }
