@@ -345,7 +345,10 @@ impl ParticipantOptions {
         let Some(dir) = &self.out_dir else {
             bail!("a checkpoint is due after step {step}, but this participant has no output directory (--out-dir) to write it in");
         };
-        crate::checkpoint::write(dir, role, scene.hash, step, &payload()?)?;
+        let t = Instant::now();
+        let bytes = payload()?;
+        crate::checkpoint::write(dir, role, scene.hash, step, &bytes)?;
+        tracing::debug!("checkpoint after step {step}: {} bytes in {:.1} ms", bytes.len(), t.elapsed().as_secs_f64() * 1e3);
         Ok(())
     }
 }
