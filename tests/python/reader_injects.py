@@ -1,40 +1,34 @@
 """A reader tries to publish a fake summary to the other clients of a bridge with access
-control; a second client (a steerer) listens to the summaries.
+control, and to pause the run; a second client (a steerer) listens to the summaries. Both
+are `grains_client.Client`s with user and password.
 
     python3 tests/python/reader_injects.py tcp/127.0.0.1:7447 <run-id> viewer:look pilot:fly
 
 Prints "received N summaries, F fake" and exits 0 when the listener received real summaries
-and no fake one, 1 otherwise.
+and no fake one and the reader's pause got no answer (zenoh drops it), 1 otherwise.
 """
 
-import json
 import sys
 import time
 
-import zenoh
-
-
-def session(endpoint, credentials):
-    user, password = credentials.split(":", 1)
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
-    conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
-    return zenoh.open(conf)
-
+from grains_client import Client, NoAnswer
 
 endpoint, run, reader, listener = sys.argv[1:5]
 key = f"grains/{run}/state/summary"
-with session(endpoint, listener) as ears, session(endpoint, reader) as mouth:
+with Client(endpoint, *listener.split(":", 1)) as ears, Client(endpoint, *reader.split(":", 1)) as mouth:
     got = []
-    sub = ears.declare_subscriber(key, lambda s: got.append(s.payload.to_string()))
+    sub = ears.session.declare_subscriber(key, lambda s: got.append(s.payload.to_string()))
     time.sleep(0.5)
     for _ in range(20):
-        mouth.put(key, "FAKE")
+        mouth.session.put(key, "FAKE")
         time.sleep(0.05)
     time.sleep(1.0)
     fake = sum(1 for g in got if g == "FAKE")
     print(f"received {len(got)} summaries, {fake} fake")
+    try:
+        mouth.steer(run, {"command": "pause"}, timeout=2.0)
+        print("the reader's pause was answered")
+        sys.exit(1)
+    except NoAnswer:
+        print("the reader's pause got no answer")
     sys.exit(0 if got and fake == 0 else 1)

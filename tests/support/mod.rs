@@ -199,8 +199,10 @@ fn test_venv() -> Result<PathBuf, String> {
     let clients = repo().join("clients/python");
     let _lock = FileLock::take(&target.join("test-python.lock"))?;
     let wanted = std::fs::read_to_string(&requirements).map_err(|e| format!("{}: {e}", requirements.display()))?;
-    // The stamp names the editable install too, so that a venv made before it is remade.
-    let wanted = format!("{wanted}-e {}\n", clients.display());
+    // The stamp names the editable install and its pyproject.toml too, so that a venv made
+    // before either changed (a package added, a dependency) is remade.
+    let pyproject = std::fs::read_to_string(clients.join("pyproject.toml")).map_err(|e| format!("clients/python/pyproject.toml: {e}"))?;
+    let wanted = format!("{wanted}-e {}\n{pyproject}", clients.display());
     let stamp = venv.join("requirements.installed");
     if python.exists() && std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted) {
         return Ok(python);

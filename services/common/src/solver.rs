@@ -348,7 +348,11 @@ impl ParticipantOptions {
         let t = Instant::now();
         let bytes = payload()?;
         crate::checkpoint::write(dir, role, scene.hash, step, &bytes)?;
-        tracing::debug!("checkpoint after step {step}: {} bytes in {:.1} ms", bytes.len(), t.elapsed().as_secs_f64() * 1e3);
+        tracing::debug!(
+            "checkpoint after step {step}: {} bytes in {:.1} ms",
+            bytes.len(),
+            t.elapsed().as_secs_f64() * 1e3
+        );
         Ok(())
     }
 }
