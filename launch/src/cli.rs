@@ -77,6 +77,10 @@ pub struct RunArgs {
     /// Start everything but this participant and wait for it to attach (repeatable).
     #[arg(long, value_parser = parse_role)]
     pub external: Vec<Role>,
+    /// With `--transport zenoh`: the endpoint the launcher listens on, e.g.
+    /// `tcp/192.168.1.10:7450` for a participant on another host (default: a free loopback port).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh_listen: Option<String>,
     /// Root of the output directories.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
@@ -114,6 +118,7 @@ impl RunArgs {
             announce: true,
             bridge: self.bridge.then_some(self.bridge_args),
             resume: None,
+            zenoh_listen: self.zenoh_listen,
         }
     }
 }
@@ -128,6 +133,10 @@ pub struct ResumeArgs {
     /// Start everything but this participant and wait for it to attach (repeatable).
     #[arg(long, value_parser = parse_role)]
     pub external: Vec<Role>,
+    /// With `--transport zenoh`: the endpoint the launcher listens on, e.g.
+    /// `tcp/192.168.1.10:7450` for a participant on another host (default: a free loopback port).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh_listen: Option<String>,
     /// No live progress line.
     #[arg(long)]
     pub quiet: bool,
@@ -150,6 +159,7 @@ impl ResumeArgs {
             announce: true,
             bridge: self.bridge.then_some(self.bridge_args),
             resume: Some(self.run_dir),
+            zenoh_listen: self.zenoh_listen,
         }
     }
 }

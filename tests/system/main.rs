@@ -4,6 +4,7 @@
 mod bridge;
 mod calibrate;
 mod oracle;
+mod remote;
 mod restart;
 mod steps;
 

@@ -73,6 +73,7 @@ fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64) -> anyhow::Resul
             let opts = RunOptions {
                 bridge: None,
                 resume: None,
+                zenoh_listen: None,
                 scene_path: scene.clone(),
                 transport,
                 external: vec![],

@@ -34,6 +34,7 @@ pub(crate) fn run_resolved(
     let outcome = run(&RunOptions {
         bridge: None,
         resume: None,
+        zenoh_listen: None,
         scene_path: resolved,
         transport: TransportKind::Ipc,
         external: Vec::new(),

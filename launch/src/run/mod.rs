@@ -36,6 +36,9 @@ pub enum TransportKind {
     Ipc,
     /// Threads of the launcher's process (same participants, same protocol).
     Inproc,
+    /// Separate processes exchanging over zenoh (TCP) through the launcher: a participant
+    /// may run on another host (`--external ROLE`, joined with `--zenoh ENDPOINT`).
+    Zenoh,
 }
 
 #[derive(Clone, Debug)]
@@ -54,6 +57,9 @@ pub struct RunOptions {
     pub announce: bool,
     /// Start the zenoh bridge with these flags.
     pub bridge: Option<BridgeArgs>,
+    /// With `--transport zenoh`: the endpoint the launcher's zenoh router listens on
+    /// (default a free loopback port); participants connect to it.
+    pub zenoh_listen: Option<String>,
     /// Continue the run in this directory from its last complete checkpoint (`grains resume`):
     /// its own copy of the scene is the scene; `scene_path` and `overrides` are not read.
     pub resume: Option<PathBuf>,
@@ -232,9 +238,24 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     }
     if opts.transport == TransportKind::Inproc && !opts.external.is_empty() {
         bail!(BadInput(
-            "--external needs --transport ipc: an external participant is another process".into()
+            "--external needs --transport ipc or zenoh: an external participant is another process".into()
         ));
     }
+    if opts.transport == TransportKind::Zenoh && (opts.bridge.is_some() || scene.bridge.is_some()) {
+        bail!(BadInput(
+            "--transport zenoh with a bridge: not supported yet (the bridge reads a run over iceoryx2); run without --bridge".into()
+        ));
+    }
+    if opts.transport != TransportKind::Zenoh && opts.zenoh_listen.is_some() {
+        bail!(BadInput("--zenoh-listen needs --transport zenoh".into()));
+    }
+    let zenoh_endpoint = match opts.transport {
+        TransportKind::Zenoh => Some(match &opts.zenoh_listen {
+            Some(e) => e.clone(),
+            None => free_loopback_endpoint()?,
+        }),
+        _ => None,
+    };
     let bridge_args = bridge_args(opts, &scene);
     let bridge_cfg = match &bridge_args {
         Some(args) => Some(args.resolve().map_err(|e| BadInput(format!("{e:#}")))?),
@@ -277,6 +298,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         dir: &dir,
         opts,
         resume: resume.as_ref(),
+        zenoh: zenoh_endpoint.as_deref(),
     };
     let resume_dir = resume.as_ref().map(|r| r.checkpoint.as_path());
     let (report, participants) = match opts.transport {
@@ -296,12 +318,37 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                     &dir,
                     external_timeout,
                     resume_dir,
+                    &[],
                 )?) as Box<dyn Participants>)
             })
             .and_then(Supervisor::run);
             drop(transport);
             ipc::remove_run_files(&run_id);
             result?
+        }
+        TransportKind::Zenoh => {
+            let listen = zenoh_endpoint.as_deref().expect("set for zenoh");
+            let transport = grains_transport::zenoh::Zenoh::router(&run_id, Role::Launcher.binary(), listen)?;
+            let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
+            let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
+            let connect = ["--zenoh".to_string(), local_connect(listen)];
+            Supervisor::start(
+                &transport,
+                &ctx,
+                || Ok(None),
+                || {
+                    Ok(Box::new(Processes::spawn(
+                        &spawned,
+                        &scene_path,
+                        &run_id,
+                        &dir,
+                        external_timeout,
+                        resume_dir,
+                        &connect,
+                    )?) as Box<dyn Participants>)
+                },
+            )?
+            .run()?
         }
         TransportKind::Inproc => {
             let bus = InProc::new();
@@ -317,6 +364,18 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     };
     write_summary(&ctx, &report, participants, started)?;
     Ok(report)
+}
+
+/// `tcp/127.0.0.1:<a port that was free a moment ago>`.
+fn free_loopback_endpoint() -> anyhow::Result<String> {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").context("finding a free port for the zenoh router")?;
+    Ok(format!("tcp/127.0.0.1:{}", l.local_addr()?.port()))
+}
+
+/// Where a participant on the launcher's own host connects to a router listening on
+/// `listen`: the same endpoint, but loopback for an unspecified address.
+fn local_connect(listen: &str) -> String {
+    listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 }
 
 /// The bridge's flags: asked for on the command line, or by the scene's `[bridge]` table. The
@@ -345,4 +404,6 @@ struct RunCtx<'a> {
     opts: &'a RunOptions,
     /// What a resumed run continues from.
     resume: Option<&'a resume::Resumed>,
+    /// The zenoh router's endpoint (`--transport zenoh`).
+    zenoh: Option<&'a str>,
 }

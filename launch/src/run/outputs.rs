@@ -32,7 +32,7 @@ pub(super) fn write_summary(ctx: &RunCtx, r: &RunOutcome, participants: serde_js
         "scene_name": ctx.scene.name,
         "scene_hash": format!("{:016x}", ctx.scene.hash),
         "protocol_version": PROTOCOL_VERSION,
-        "transport": match ctx.opts.transport { TransportKind::Ipc => "ipc", TransportKind::Inproc => "inproc" },
+        "transport": match ctx.opts.transport { TransportKind::Ipc => "ipc", TransportKind::Inproc => "inproc", TransportKind::Zenoh => "zenoh" },
         "status": r.status.as_str(),
         "message": r.message,
         "steps_planned": ctx.scene.steps,

@@ -93,6 +93,7 @@ impl Processes {
         out_dir: &Path,
         connect_timeout: f64,
         resume: Option<&Path>,
+        extra: &[String],
     ) -> anyhow::Result<Self> {
         let dir = bin_dir();
         let mut children = Vec::new();
@@ -110,6 +111,7 @@ impl Processes {
             if let Some(dir) = resume {
                 cmd.arg("--resume").arg(dir);
             }
+            cmd.args(extra);
             let child = cmd.spawn().map_err(|e| anyhow::anyhow!("cannot start {}: {e}", bin.display()))?;
             let pid = child.id();
             children.push((role, Some(child), pid));

@@ -141,6 +141,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
             let how = match ctx.opts.transport {
                 TransportKind::Ipc => "processes",
                 TransportKind::Inproc => "threads",
+                TransportKind::Zenoh => "processes over zenoh",
             };
             if !pids.is_empty() {
                 tracing::info!("started as {how}: {}", pids.join(", "));
@@ -171,6 +172,9 @@ impl<'a, T: Transport> Supervisor<'a, T> {
                 .map(|r| std::fs::canonicalize(&r.checkpoint).unwrap_or_else(|_| r.checkpoint.clone()));
             if let Some(r) = &resume {
                 words.extend(["--resume".as_ref(), r.as_os_str()]);
+            }
+            if let Some(z) = ctx.zenoh {
+                words.extend([std::ffi::OsStr::new("--zenoh"), std::ffi::OsStr::new(z)]);
             }
             tracing::info!(
                 "waiting for an external {e} to attach; start it (or your own program, with the same arguments) with:\n  {}",

@@ -21,6 +21,7 @@ pub fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> a
     run(&RunOptions {
         bridge: None,
         resume: None,
+        zenoh_listen: None,
         scene_path: scene.to_path_buf(),
         transport: TransportKind::Ipc,
         external: Vec::new(),

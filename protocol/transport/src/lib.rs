@@ -3,6 +3,8 @@
 //! - [`ipc::Iceoryx2`]: separate processes over iceoryx2 shared memory. Payloads are loaned
 //!   from the service's data segment and written in place; the subscriber reads them where
 //!   they lie. Nothing is serialized or copied.
+//! - [`zenoh::Zenoh`]: processes on any hosts over TCP (zenoh), for a participant elsewhere;
+//!   every message is copied into one zenoh put.
 //! - [`inproc::InProc`]: threads of one process. Payload buffers come from a per-service pool
 //!   and are handed over by reference count; nothing is copied either.
 //!
@@ -10,10 +12,11 @@
 //! header `H`. A waiting subscriber blocks on an event (iceoryx2: the paired event service;
 //! in-process: a condition variable) with a deadline, never in a spin.
 //!
-//! This is the only crate of grains that uses iceoryx2.
+//! This is the only crate of grains that uses iceoryx2 (and, besides the bridge, zenoh).
 
 pub mod inproc;
 pub mod ipc;
+pub mod zenoh;
 
 use grains_protocol::wire::*;
 use std::time::Duration;

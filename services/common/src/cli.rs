@@ -18,6 +18,11 @@ pub struct CommonArgs {
     /// The run's output directory: frames are written under it (none if not given).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    /// Join over zenoh, as a client of the launcher's router at this endpoint
+    /// (`grains run --transport zenoh` prints it), instead of over iceoryx2 shared memory:
+    /// a participant on another host.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh: Option<String>,
     /// Resume from this checkpoint directory (`<run dir>/checkpoints/<step>`, one with a
     /// `manifest.json`): the state of this participant's file there, then the next step.
     #[arg(long)]

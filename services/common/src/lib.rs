@@ -50,23 +50,30 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
     }
 }
 
+/// The body of a participant over a transport (its service's `run::<T>`).
+pub type Body<'a, T> = &'a dyn Fn(&T, &grains_protocol::scene::Scene, &solver::ParticipantOptions) -> anyhow::Result<()>;
+
 /// The whole `main` of a participant binary: load the scene (exit 2 on bad input), join the
-/// run's iceoryx2 domain, run `body`, report an error once on stderr, pick the exit code.
+/// run's iceoryx2 domain (or, with `--zenoh`, its zenoh router), run the body for that
+/// transport, report an error once on stderr, pick the exit code.
 pub fn participant_main(
     role: grains_protocol::Role,
     args: &cli::CommonArgs,
-    body: impl FnOnce(&grains_transport::ipc::Iceoryx2, &grains_protocol::scene::Scene, &solver::ParticipantOptions) -> anyhow::Result<()>,
+    over_ipc: Body<grains_transport::ipc::Iceoryx2>,
+    over_zenoh: Body<grains_transport::zenoh::Zenoh>,
 ) -> std::process::ExitCode {
     telemetry::init(role.binary());
     let run = || -> anyhow::Result<()> {
         let scene = grains_protocol::scene::load(&args.scene)?;
         // Held while this process may write into the run's directory (see `checkpoint`).
+        // (On another host the directory may not exist yet: its outputs there are its own.)
         let _held = match &args.out_dir {
-            Some(dir) => checkpoint::hold(dir, false).map_err(|e| anyhow::anyhow!("{}: run.lock: {e}", dir.display()))?,
+            Some(dir) => std::fs::create_dir_all(dir)
+                .and_then(|()| checkpoint::hold(dir, false))
+                .map_err(|e| anyhow::anyhow!("{}: run.lock: {e}", dir.display()))?,
             None => None,
         };
         let stop = signals::StopFlag::with_signals();
-        let transport = grains_transport::ipc::Iceoryx2::join(&args.run_id, role.binary(), stop.as_cancel())?;
         let opts = solver::ParticipantOptions {
             run_id: args.run_id.clone(),
             stop,
@@ -76,7 +83,18 @@ pub fn participant_main(
             out_dir: args.out_dir.clone(),
             resume: args.resume.as_deref().map(checkpoint::Resume::open).transpose()?,
         };
-        body(&transport, &scene, &opts)
+        match &args.zenoh {
+            None => over_ipc(
+                &grains_transport::ipc::Iceoryx2::join(&args.run_id, role.binary(), opts.stop.as_cancel())?,
+                &scene,
+                &opts,
+            ),
+            Some(endpoint) => over_zenoh(
+                &grains_transport::zenoh::Zenoh::client(&args.run_id, role.binary(), endpoint)?,
+                &scene,
+                &opts,
+            ),
+        }
     };
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,

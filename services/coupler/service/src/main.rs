@@ -13,5 +13,10 @@ struct Cli {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    grains_service::participant_main(grains_protocol::Role::Coupler, &cli.common, grains_coupler_service::run)
+    grains_service::participant_main(
+        grains_protocol::Role::Coupler,
+        &cli.common,
+        &grains_coupler_service::run::<grains_transport::ipc::Iceoryx2>,
+        &grains_coupler_service::run::<grains_transport::zenoh::Zenoh>,
+    )
 }

@@ -12,5 +12,10 @@ struct Cli {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    grains_service::participant_main(grains_protocol::Role::Mpm, &cli.common, grains_mpm_service::run)
+    grains_service::participant_main(
+        grains_protocol::Role::Mpm,
+        &cli.common,
+        &grains_mpm_service::run::<grains_transport::ipc::Iceoryx2>,
+        &grains_mpm_service::run::<grains_transport::zenoh::Zenoh>,
+    )
 }

@@ -13,5 +13,10 @@ struct Cli {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    grains_service::participant_main(grains_protocol::Role::Oracle, &cli.common, grains_oracle_service::run)
+    grains_service::participant_main(
+        grains_protocol::Role::Oracle,
+        &cli.common,
+        &grains_oracle_service::run::<grains_transport::ipc::Iceoryx2>,
+        &grains_oracle_service::run::<grains_transport::zenoh::Zenoh>,
+    )
 }
