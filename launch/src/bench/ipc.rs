@@ -5,7 +5,8 @@
 //! runs over in-process threads and over iceoryx2 processes, alternating, in one session. The
 //! figure is wall time per macro-step after a warm-up, median of the repeats; the difference
 //! between the two transports is the cost of the processes (wake-ups across processes, shared
-//! memory) since the writes and reads are the same in both. Content is the cheap "plain" kind
+//! memory) since the writes and reads are the same in both. The zenoh transport (processes
+//! over loopback TCP, for participants on other hosts) runs the same scenes beside them. Content is the cheap "plain" kind
 //! and checksums are off, so that the exchange, not the synthetic solver, is what is timed.
 
 use crate::run::{RunOptions, Status, TransportKind, run};
@@ -24,6 +25,9 @@ pub struct IpcArgs {
     /// Macro-steps of the tiny-payload handshake measurement.
     #[arg(long, default_value_t = 20_000)]
     pub handshake_steps: u64,
+    /// Largest raster the zenoh transport is measured with (it copies every message into TCP).
+    #[arg(long, default_value_t = 1_000_000)]
+    pub zenoh_max: u64,
     /// Where scenes, runs and the result table go.
     #[arg(long, default_value = "out/bench/ipc")]
     pub out: PathBuf,
@@ -64,12 +68,18 @@ fn stat(mut v: Vec<f64>) -> Stat {
     }
 }
 
-fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64) -> anyhow::Result<(Stat, Stat)> {
+/// Seconds per macro-step on each transport (in-process, iceoryx2, and zenoh unless
+/// `zenoh` is false), the runs alternating.
+fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64, zenoh: bool) -> anyhow::Result<[Option<Stat>; 3]> {
     let scene = args.out.join(format!("scene_{nodes}.toml"));
     std::fs::write(&scene, scene_text(nodes, steps))?;
-    let mut times = [Vec::new(), Vec::new()];
+    let transports = [TransportKind::Inproc, TransportKind::Ipc, TransportKind::Zenoh];
+    let mut times = [Vec::new(), Vec::new(), Vec::new()];
     for _ in 0..args.repeats {
-        for (k, transport) in [TransportKind::Inproc, TransportKind::Ipc].into_iter().enumerate() {
+        for (k, &transport) in transports.iter().enumerate() {
+            if transport == TransportKind::Zenoh && !zenoh {
+                continue;
+            }
             let opts = RunOptions {
                 bridge: None,
                 resume: None,
@@ -90,8 +100,7 @@ fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64) -> anyhow::Resul
             let _ = std::fs::remove_dir_all(&outcome.dir);
         }
     }
-    let [a, b] = times;
-    Ok((stat(a), stat(b)))
+    Ok(times.map(|t| (!t.is_empty()).then(|| stat(t))))
 }
 
 pub fn ipc(args: &IpcArgs) -> anyhow::Result<()> {
@@ -103,39 +112,44 @@ pub fn ipc(args: &IpcArgs) -> anyhow::Result<()> {
         let steps = (200_000_000 / n.max(1)).clamp(20, 2_000);
         let warmup = (steps / 5).max(2);
         tracing::info!("bench ipc: {n} nodes, {steps} steps x {} repeats per transport ...", args.repeats);
-        let (inproc, ipc) = measure(args, n, steps, warmup)?;
-        rows.push((n, steps, inproc, ipc));
+        rows.push((n, steps, measure(args, n, steps, warmup, n <= args.zenoh_max)?));
     }
     tracing::info!("bench ipc: handshake with 1-node payloads, {} steps ...", args.handshake_steps);
-    let (hs_inproc, hs_ipc) = measure(args, 1, args.handshake_steps, args.handshake_steps / 10)?;
+    let hs = measure(args, 1, args.handshake_steps, args.handshake_steps / 10, true)?;
 
+    let ms = |x: &Option<Stat>| x.map_or("—".to_string(), |x| format!("{:.3} ({:.3})", x.median * 1e3, x.min * 1e3));
     let mut out = String::new();
     out.push_str(&format!(
-        "machine: {} cores; {} runs per cell, alternating in-process and iceoryx2; wall time per macro-step after warm-up, median (min)\n\n",
+        "machine: {} cores; {} runs per cell, alternating in-process, iceoryx2 and zenoh (loopback TCP, rasters up to {} nodes); \
+         wall time per macro-step after warm-up, median (min)\n\n",
         std::thread::available_parallelism().map_or(0, |n| n.get()),
-        args.repeats
+        args.repeats,
+        args.zenoh_max
     ));
-    out.push_str("| nodes per raster | steps | in-process ms/step | iceoryx2 ms/step | iceoryx2 − in-process ms, medians (mins) | ratio of medians |\n");
-    out.push_str("|---:|---:|---:|---:|---:|---:|\n");
-    for (n, steps, a, b) in &rows {
+    out.push_str(
+        "| nodes per raster | steps | in-process ms/step | iceoryx2 ms/step | iceoryx2 − in-process ms, medians (mins) | ratio of medians | zenoh ms/step | zenoh / iceoryx2 |\n",
+    );
+    out.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for (n, steps, [a, b, z]) in &rows {
+        let (a, b) = (a.expect("in-process"), b.expect("iceoryx2"));
         out.push_str(&format!(
-            "| {n} | {steps} | {:.3} ({:.3}) | {:.3} ({:.3}) | {:+.3} ({:+.3}) | {:.2} |\n",
-            a.median * 1e3,
-            a.min * 1e3,
-            b.median * 1e3,
-            b.min * 1e3,
+            "| {n} | {steps} | {} | {} | {:+.3} ({:+.3}) | {:.2} | {} | {} |\n",
+            ms(&Some(a)),
+            ms(&Some(b)),
             (b.median - a.median) * 1e3,
             (b.min - a.min) * 1e3,
-            b.median / a.median
+            b.median / a.median,
+            ms(z),
+            z.map_or("—".to_string(), |z| format!("{:.2}", z.median / b.median)),
         ));
     }
+    let us = |x: &Option<Stat>| x.map_or("—".to_string(), |x| format!("{:.1} ({:.1})", x.median * 1e6, x.min * 1e6));
     out.push_str(&format!(
         "\nhandshake, 1-node payloads (DEM and MPM publish, coupler answers both, summaries to the launcher):\n\n\
-         | transport | µs per macro-step, median (min) |\n|---|---:|\n| in-process | {:.1} ({:.1}) |\n| iceoryx2 | {:.1} ({:.1}) |\n",
-        hs_inproc.median * 1e6,
-        hs_inproc.min * 1e6,
-        hs_ipc.median * 1e6,
-        hs_ipc.min * 1e6
+         | transport | µs per macro-step, median (min) |\n|---|---:|\n| in-process | {} |\n| iceoryx2 | {} |\n| zenoh | {} |\n",
+        us(&hs[0]),
+        us(&hs[1]),
+        us(&hs[2])
     ));
     println!("{out}");
     let table = args.out.join("ipc.md");

@@ -227,7 +227,7 @@ impl crate::Transport for Zenoh {
     fn publisher<E: Pod + crate::ZeroCopy, H: Pod + crate::ZeroCopy>(
         &self,
         spec: &ServiceSpec,
-        initial_len: usize,
+        _initial_len: usize,
     ) -> Result<Self::Publisher<E, H>, TransportError> {
         let publisher = self
             .session
@@ -244,7 +244,6 @@ impl crate::Transport for Zenoh {
             publisher,
             _token: self.port_token(spec, "pub")?,
             peers: self.peers.clone(),
-            buf: Vec::with_capacity(std::mem::size_of::<H>() + initial_len * std::mem::size_of::<E>()),
             _types: PhantomData,
         })
     }
@@ -300,7 +299,6 @@ pub struct ZenohPublisher<E, H> {
     /// The port's liveliness token: the others count it while it lives.
     _token: LivelinessToken,
     peers: Arc<Mutex<Peers>>,
-    buf: Vec<u8>,
     _types: PhantomData<(E, H)>,
 }
 
@@ -309,10 +307,11 @@ impl<E: Pod, H: Pod> crate::Publisher<E, H> for ZenohPublisher<E, H> {
         let mut header = H::default();
         let mut elements = vec![E::default(); len];
         fill(&mut header, &mut elements);
-        self.buf.clear();
-        self.buf.extend_from_slice(crate::as_bytes(std::slice::from_ref(&header)));
-        self.buf.extend_from_slice(crate::as_bytes(&elements));
-        self.publisher.put(self.buf.clone()).wait().map_err(|e| io_err(self.name, e))
+        // One buffer handed to zenoh as it is (no further copy on this side).
+        let mut buf = Vec::with_capacity(std::mem::size_of::<H>() + std::mem::size_of_val(elements.as_slice()));
+        buf.extend_from_slice(crate::as_bytes(std::slice::from_ref(&header)));
+        buf.extend_from_slice(crate::as_bytes(&elements));
+        self.publisher.put(buf).wait().map_err(|e| io_err(self.name, e))
     }
 
     fn subscriber_count(&self) -> usize {
@@ -357,17 +356,19 @@ impl<E: Pod, H: Pod> crate::Subscriber<E, H> for ZenohSubscriber<E, H> {
         } else {
             (bytes.len() - hs) / es
         };
-        // Copied out into aligned values: a zenoh buffer has no alignment to speak of.
-        // SAFETY: `H: Pod` and `E: Pod` take any bytes; the lengths were checked above.
+        // SAFETY: `H: Pod` takes any bytes; the length was checked above.
         let header: H = unsafe { std::ptr::read_unaligned(bytes.as_ptr().cast::<H>()) };
+        let at = bytes[hs..].as_ptr();
+        if at.cast::<E>().is_aligned() {
+            // Read where it lies (a zenoh buffer is usually aligned well enough).
+            // SAFETY: `E: Pod` takes any bytes; aligned, n elements in bounds (checked above).
+            let elements = unsafe { std::slice::from_raw_parts(at.cast::<E>(), n) };
+            return Ok(Some(read(&header, elements)));
+        }
         let mut elements = vec![E::default(); n];
         // SAFETY: as above; the destination holds exactly n elements of E.
         unsafe {
-            std::ptr::copy_nonoverlapping(
-                bytes[hs..].as_ptr(),
-                elements.as_mut_ptr().cast::<u8>(),
-                n * std::mem::size_of::<E>(),
-            );
+            std::ptr::copy_nonoverlapping(at, elements.as_mut_ptr().cast::<u8>(), n * std::mem::size_of::<E>());
         }
         Ok(Some(read(&header, &elements)))
     }
