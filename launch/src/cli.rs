@@ -71,6 +71,25 @@ pub enum Cmd {
 pub struct RunArgs {
     /// Scene file (TOML, schema v1; see scenes/README.md).
     pub scene: PathBuf,
+    #[command(flatten)]
+    pub launch: LaunchArgs,
+    /// Root of the output directories.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Override a scene value before validation, e.g. `--set coupling.substeps=20` or
+    /// `--set body.0.max=[0.04,0.08]` (repeatable; values in TOML syntax).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+    /// Checkpoint every N macro-steps into <run dir>/checkpoints/ (`grains resume` continues
+    /// from the last); the same as `--set output.checkpoint_every=N`.
+    #[arg(long, value_name = "N")]
+    pub checkpoint_every: Option<u64>,
+}
+
+/// How a run (new or resumed) is launched: its transport, the participants left to attach,
+/// progress, the bridge.
+#[derive(clap::Args)]
+pub struct LaunchArgs {
     /// How participants run and talk.
     #[arg(long, value_enum, default_value_t = TransportKind::Ipc)]
     pub transport: TransportKind,
@@ -81,25 +100,38 @@ pub struct RunArgs {
     /// `tcp/192.168.1.10:7450` for a participant on another host (default: a free loopback port).
     #[arg(long, value_name = "ENDPOINT")]
     pub zenoh_listen: Option<String>,
-    /// Root of the output directories.
-    #[arg(long, default_value = "out")]
-    pub out: PathBuf,
     /// No live progress line.
     #[arg(long)]
     pub quiet: bool,
-    /// Override a scene value before validation, e.g. `--set coupling.substeps=20` or
-    /// `--set body.0.max=[0.04,0.08]` (repeatable; values in TOML syntax).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub overrides: Vec<String>,
     /// Open the run to remote clients over zenoh (grains monitor, grains steer; see README).
     #[arg(long)]
     pub bridge: bool,
     #[command(flatten)]
     pub bridge_args: grains_bridge::config::BridgeArgs,
-    /// Checkpoint every N macro-steps into <run dir>/checkpoints/ (`grains resume` continues
-    /// from the last); the same as `--set output.checkpoint_every=N`.
-    #[arg(long, value_name = "N")]
-    pub checkpoint_every: Option<u64>,
+}
+
+impl LaunchArgs {
+    /// The options of a run of `scene_path` with `overrides`, or of the run in `resume`.
+    fn options(
+        self,
+        scene_path: PathBuf,
+        out_root: PathBuf,
+        overrides: Vec<String>,
+        resume: Option<PathBuf>,
+    ) -> grains_launch::run::RunOptions {
+        grains_launch::run::RunOptions {
+            scene_path,
+            transport: self.transport,
+            external: self.external,
+            out_root,
+            progress: !self.quiet,
+            overrides,
+            announce: true,
+            bridge: self.bridge.then_some(self.bridge_args),
+            resume,
+            zenoh_listen: self.zenoh_listen,
+        }
+    }
 }
 
 impl RunArgs {
@@ -108,18 +140,7 @@ impl RunArgs {
         if let Some(n) = self.checkpoint_every {
             overrides.push(format!("output.checkpoint_every={n}"));
         }
-        grains_launch::run::RunOptions {
-            scene_path: self.scene,
-            transport: self.transport,
-            external: self.external,
-            out_root: self.out,
-            progress: !self.quiet,
-            overrides,
-            announce: true,
-            bridge: self.bridge.then_some(self.bridge_args),
-            resume: None,
-            zenoh_listen: self.zenoh_listen,
-        }
+        self.launch.options(self.scene, self.out, overrides, None)
     }
 }
 
@@ -127,40 +148,14 @@ impl RunArgs {
 pub struct ResumeArgs {
     /// The run's directory (out/<scene>/<run id>).
     pub run_dir: PathBuf,
-    /// How participants run and talk.
-    #[arg(long, value_enum, default_value_t = TransportKind::Ipc)]
-    pub transport: TransportKind,
-    /// Start everything but this participant and wait for it to attach (repeatable).
-    #[arg(long, value_parser = parse_role)]
-    pub external: Vec<Role>,
-    /// With `--transport zenoh`: the endpoint the launcher listens on, e.g.
-    /// `tcp/192.168.1.10:7450` for a participant on another host (default: a free loopback port).
-    #[arg(long, value_name = "ENDPOINT")]
-    pub zenoh_listen: Option<String>,
-    /// No live progress line.
-    #[arg(long)]
-    pub quiet: bool,
-    /// Open the run to remote clients over zenoh (grains monitor, grains steer; see README).
-    #[arg(long)]
-    pub bridge: bool,
     #[command(flatten)]
-    pub bridge_args: grains_bridge::config::BridgeArgs,
+    pub launch: LaunchArgs,
 }
 
 impl ResumeArgs {
     pub fn options(self) -> grains_launch::run::RunOptions {
-        grains_launch::run::RunOptions {
-            scene_path: self.run_dir.join("scene.toml"),
-            transport: self.transport,
-            external: self.external,
-            out_root: PathBuf::new(),
-            progress: !self.quiet,
-            overrides: Vec::new(),
-            announce: true,
-            bridge: self.bridge.then_some(self.bridge_args),
-            resume: Some(self.run_dir),
-            zenoh_listen: self.zenoh_listen,
-        }
+        let scene = self.run_dir.join("scene.toml");
+        self.launch.options(scene, PathBuf::new(), Vec::new(), Some(self.run_dir))
     }
 }
 

@@ -301,27 +301,21 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         zenoh: zenoh_endpoint.as_deref(),
     };
     let resume_dir = resume.as_ref().map(|r| r.checkpoint.as_path());
+    // The participants as processes (iceoryx2 or zenoh), `extra` arguments to each.
+    let spawn = |extra: &[String]| -> anyhow::Result<Box<dyn Participants>> {
+        let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
+        let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
+        let p = Processes::spawn(&spawned, &scene_path, &run_id, &dir, external_timeout, resume_dir, extra)?;
+        Ok(Box::new(p))
+    };
     let (report, participants) = match opts.transport {
         TransportKind::Ipc => {
             let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary(), StopFlag::with_signals().as_cancel())?;
-            let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
-            let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
             let bridge = || match &bridge_args {
                 Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir).map(Some),
                 None => Ok(None),
             };
-            let result = Supervisor::start(&transport, &ctx, bridge, || {
-                Ok(Box::new(Processes::spawn(
-                    &spawned,
-                    &scene_path,
-                    &run_id,
-                    &dir,
-                    external_timeout,
-                    resume_dir,
-                    &[],
-                )?) as Box<dyn Participants>)
-            })
-            .and_then(Supervisor::run);
+            let result = Supervisor::start(&transport, &ctx, bridge, || spawn(&[])).and_then(Supervisor::run);
             drop(transport);
             ipc::remove_run_files(&run_id);
             result?
@@ -329,26 +323,8 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         TransportKind::Zenoh => {
             let listen = zenoh_endpoint.as_deref().expect("set for zenoh");
             let transport = grains_transport::zenoh::Zenoh::router(&run_id, Role::Launcher.binary(), listen)?;
-            let external_timeout = if opts.external.is_empty() { 60.0 } else { 0.0 };
-            let spawned: Vec<Role> = roles.iter().copied().filter(|r| !opts.external.contains(r)).collect();
             let connect = ["--zenoh".to_string(), local_connect(listen)];
-            Supervisor::start(
-                &transport,
-                &ctx,
-                || Ok(None),
-                || {
-                    Ok(Box::new(Processes::spawn(
-                        &spawned,
-                        &scene_path,
-                        &run_id,
-                        &dir,
-                        external_timeout,
-                        resume_dir,
-                        &connect,
-                    )?) as Box<dyn Participants>)
-                },
-            )?
-            .run()?
+            Supervisor::start(&transport, &ctx, || Ok(None), || spawn(&connect))?.run()?
         }
         TransportKind::Inproc => {
             let bus = InProc::new();
