@@ -70,14 +70,28 @@ fn bridge_pid(stderr: &str) -> i32 {
     line[at..at + line[at..].find(')').expect(")")].parse().expect("pid")
 }
 
+/// The Python client (`grains_client`, tests/python/bridge_client.py) watches, pauses, resumes
+/// and stops a run; the same over the zenoh transport (the bridge then reads the run as a
+/// zenoh client of the launcher's router, as a participant on another host would).
 #[test]
 fn a_python_client_watches_pauses_resumes_and_stops_a_run() {
     // The clients' Python first: if it cannot be had, fail before any run starts.
     grains_system_tests::python();
     let _machine = machine();
     let out = out_dir("bridge-python");
+    for transport in ["ipc", "zenoh"] {
+        python_client_run(&out, transport);
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+fn python_client_run(out: &std::path::Path, transport: &str) {
     let connect = free_endpoint();
-    let (mut launcher, run, dir) = bridged(&out, &connect, &["--steering", "--set", FOREVER, "--set", NO_FRAMES]);
+    let (mut launcher, run, dir) = bridged(
+        out,
+        &connect,
+        &["--steering", "--set", FOREVER, "--set", NO_FRAMES, "--transport", transport],
+    );
     wait_reachable(&endpoint(&connect, None), &run, &launcher);
 
     let client = client("bridge_client.py", &[&connect, &run])
@@ -97,9 +111,9 @@ fn a_python_client_watches_pauses_resumes_and_stops_a_run() {
     let last: serde_json::Value = serde_json::from_str(said.lines().last().expect("result line")).expect("json");
     let s = summary(&dir);
     assert_eq!(s["status"], "stopped", "{s}");
+    assert_eq!(s["transport"], transport, "{s}");
     assert_eq!(s["steps_completed"], last["stopped_at"], "{s}");
     assert_eq!(metrics(&dir).len() as u64, last["stopped_at"].as_u64().unwrap());
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// Without steering every command is refused; with steering, 100 malformed or out-of-range

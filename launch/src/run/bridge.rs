@@ -21,7 +21,15 @@ pub enum Bridge {
 
 impl Bridge {
     /// `grains-bridge` as a process of its own, with the launcher's bridge flags.
-    pub fn spawn_process(args: &BridgeArgs, scene: &Scene, scene_path: &Path, run_id: &str, out_dir: &Path) -> anyhow::Result<Self> {
+    /// The bridge as a process of its own; `extra` arguments (`--zenoh ENDPOINT`) after the rest.
+    pub fn spawn_process(
+        args: &BridgeArgs,
+        scene: &Scene,
+        scene_path: &Path,
+        run_id: &str,
+        out_dir: &Path,
+        extra: &[String],
+    ) -> anyhow::Result<Self> {
         let bin = bin_dir().join(Role::Bridge.binary());
         let mut cmd = child_command(&bin);
         cmd.arg("--scene")
@@ -32,7 +40,8 @@ impl Bridge {
             .arg(out_dir)
             .arg("--scene-name")
             .arg(&scene.name)
-            .args(args.to_args());
+            .args(args.to_args())
+            .args(extra);
         let child = cmd.spawn().map_err(|e| anyhow::anyhow!("cannot start {}: {e}", bin.display()))?;
         Ok(Bridge::Process(child))
     }

@@ -241,11 +241,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             "--external needs --transport ipc or zenoh: an external participant is another process".into()
         ));
     }
-    if opts.transport == TransportKind::Zenoh && (opts.bridge.is_some() || scene.bridge.is_some()) {
-        bail!(BadInput(
-            "--transport zenoh with a bridge: not supported yet (the bridge reads a run over iceoryx2); run without --bridge".into()
-        ));
-    }
     if opts.transport != TransportKind::Zenoh && opts.zenoh_listen.is_some() {
         bail!(BadInput("--zenoh-listen needs --transport zenoh".into()));
     }
@@ -312,7 +307,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         TransportKind::Ipc => {
             let transport = ipc::Iceoryx2::join(&run_id, Role::Launcher.binary(), StopFlag::with_signals().as_cancel())?;
             let bridge = || match &bridge_args {
-                Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir).map(Some),
+                Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir, &[]).map(Some),
                 None => Ok(None),
             };
             let result = Supervisor::start(&transport, &ctx, bridge, || spawn(&[])).and_then(Supervisor::run);
@@ -324,7 +319,11 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             let listen = zenoh_endpoint.as_deref().expect("set for zenoh");
             let transport = grains_transport::zenoh::Zenoh::router(&run_id, Role::Launcher.binary(), listen)?;
             let connect = ["--zenoh".to_string(), local_connect(listen)];
-            Supervisor::start(&transport, &ctx, || Ok(None), || spawn(&connect))?.run()?
+            let bridge = || match &bridge_args {
+                Some(args) => Bridge::spawn_process(args, &scene, &scene_path, &run_id, &dir, &connect).map(Some),
+                None => Ok(None),
+            };
+            Supervisor::start(&transport, &ctx, bridge, || spawn(&connect))?.run()?
         }
         TransportKind::Inproc => {
             let bus = InProc::new();

@@ -20,6 +20,10 @@ struct Cli {
     /// The scene's name as the launcher knows it (the run's copy of the scene is `scene.toml`).
     #[arg(long)]
     scene_name: Option<String>,
+    /// Read the run over zenoh, as a client of the launcher's router at this endpoint (a run
+    /// of `grains run --transport zenoh`), instead of over iceoryx2.
+    #[arg(long, value_name = "ENDPOINT")]
+    zenoh: Option<String>,
     #[command(flatten)]
     bridge: grains_bridge::config::BridgeArgs,
 }
@@ -34,8 +38,17 @@ fn main() -> ExitCode {
             scene.name = name.clone();
         }
         let stop = grains_service::signals::StopFlag::with_signals();
-        let transport = grains_transport::ipc::Iceoryx2::join(&cli.run_id, grains_protocol::Role::Bridge.binary(), stop.as_cancel())?;
-        grains_bridge::serve(&transport, &cfg, &cli.run_id, &scene, cli.out_dir.as_deref(), &stop)
+        let name = grains_protocol::Role::Bridge.binary();
+        match &cli.zenoh {
+            None => {
+                let transport = grains_transport::ipc::Iceoryx2::join(&cli.run_id, name, stop.as_cancel())?;
+                grains_bridge::serve(&transport, &cfg, &cli.run_id, &scene, cli.out_dir.as_deref(), &stop)
+            }
+            Some(endpoint) => {
+                let transport = grains_transport::zenoh::Zenoh::client(&cli.run_id, name, endpoint)?;
+                grains_bridge::serve(&transport, &cfg, &cli.run_id, &scene, cli.out_dir.as_deref(), &stop)
+            }
+        }
     };
     match run() {
         Ok(()) => ExitCode::SUCCESS,
