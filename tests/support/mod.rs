@@ -169,6 +169,20 @@ pub fn values(dir: &Path, name: &str) -> Vec<f64> {
     metrics(dir).column(name).unwrap_or_else(|e| panic!("{e:#}"))
 }
 
+/// Rows of a running run's `metrics.csv.part` (0 before it exists).
+pub fn rows_written(dir: &Path) -> usize {
+    std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count().saturating_sub(1))
+}
+
+/// Waits up to `limit` for `ready`, failing with `what` and the launcher's stderr.
+pub fn wait_until(launcher: &Running, what: &str, limit: Duration, mut ready: impl FnMut() -> bool) {
+    let deadline = Instant::now() + limit;
+    while !ready() {
+        assert!(Instant::now() < deadline, "{what} within {limit:?}: {}", launcher.stderr());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 pub fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary.json")).expect("json")
 }

@@ -355,16 +355,12 @@ fn a_checkpoint_command_checkpoints_after_the_next_step_and_the_run_resumes_from
         let a = send(r#"{"command":"checkpoint"}"#)["step"].as_u64().expect("step");
         send(r#"{"command":"resume"}"#);
         let manifest = dir.join(format!("checkpoints/{:010}/manifest.json", a + 1));
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while !manifest.exists() {
-            assert!(
-                Instant::now() < deadline,
-                "{scene}: no checkpoint after step {}: {}",
-                a + 1,
-                launcher.stderr()
-            );
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        wait_until(
+            &launcher,
+            &format!("{scene}: a checkpoint after step {}", a + 1),
+            Duration::from_secs(30),
+            || manifest.exists(),
+        );
         launcher.child.kill().expect("SIGKILL the launcher");
         let _ = launcher.child.wait();
         std::thread::sleep(Duration::from_millis(500));

@@ -94,11 +94,7 @@ fn killing_any_participant_ends_the_run_within_2_s_and_leaves_nothing() {
         let run_id = run_id(&err);
         let dir = run_dir(&err);
         // Mid-run: wait until some rows are on disk.
-        let deadline = Instant::now() + Duration::from_secs(60);
-        while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
-            assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        wait_until(&launcher, "run did not start", Duration::from_secs(60), || rows_written(&dir) >= 19);
         let pid = pid_of(&err, victim);
         let killed = Instant::now();
         // SAFETY: kill(2) on a child of our child, by pid.
@@ -149,11 +145,7 @@ fn killing_the_launcher_stops_its_participants_within_2_s_and_the_next_run_clean
         let mut launcher = Running::grains(&["run", scene, "--out", out_s, "--set", steps]);
         let err = launcher.wait_for("started as processes", Duration::from_secs(60));
         let (run_id, dir) = (run_id(&err), run_dir(&err));
-        let deadline = Instant::now() + Duration::from_secs(60);
-        while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 5 {
-            assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        wait_until(&launcher, "run did not start", Duration::from_secs(60), || rows_written(&dir) >= 4);
         let line = err.lines().find(|l| l.contains("started as processes:")).expect("started line");
         let pids: Vec<(String, i32)> = ["grains-dem", "grains-mpm", "grains-coupler", "grains-oracle"]
             .iter()
@@ -292,11 +284,9 @@ fn an_external_participant_that_leaves_mid_run_fails_the_run() {
         &bin("grains-coupler"),
         &["--scene", scene_copy.to_str().unwrap(), "--run-id", &run_id],
     );
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |m| m.lines().count()) < 20 {
-        assert!(Instant::now() < deadline, "the run did not step: {}", launcher.stderr());
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_until(&launcher, "the run did not step", Duration::from_secs(60), || {
+        rows_written(&dir) >= 19
+    });
     // SAFETY: kill(2) on a child of ours, by pid.
     assert_eq!(unsafe { libc::kill(coupler.child.id() as i32, libc::SIGTERM) }, 0);
     let left = Instant::now();
@@ -428,11 +418,9 @@ fn python_participants_checkpoint_and_resume_from_the_spec() {
     let mut launcher = Running::grains(&args);
     let externals = start(&mut launcher);
     let dir = run_dir(&launcher.stderr());
-    let deadline = Instant::now() + LONG;
-    while !dir.join("checkpoints/0000000200/manifest.json").exists() {
-        assert!(Instant::now() < deadline, "no checkpoint: {}", launcher.stderr());
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    wait_until(&launcher, "no checkpoint", LONG, || {
+        dir.join("checkpoints/0000000200/manifest.json").exists()
+    });
     launcher.child.kill().expect("SIGKILL the launcher");
     let _ = launcher.child.wait();
     for mut e in externals {
@@ -621,11 +609,7 @@ fn ctrl_c_stops_every_participant_cleanly_and_keeps_the_outputs() {
     let mut launcher = Running::grains(&["run", "tests/scenes/synthetic_long.toml", "--out", out.to_str().unwrap()]);
     let err = launcher.wait_for("started as processes", Duration::from_secs(60));
     let (run_id, dir) = (run_id(&err), run_dir(&err));
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
-        assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_until(&launcher, "run did not start", Duration::from_secs(60), || rows_written(&dir) >= 19);
     // SAFETY: kill(2) on our child's pid.
     assert_eq!(unsafe { libc::kill(launcher.child.id() as i32, libc::SIGINT) }, 0);
     let status = launcher.wait_exit(Duration::from_secs(30));
@@ -1328,11 +1312,7 @@ fn killing_the_oracle_ends_a_hybrid_run_within_2_s() {
     ]);
     let err = launcher.wait_for("started as processes", Duration::from_secs(60));
     let (run_id, dir) = (run_id(&err), run_dir(&err));
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
-        assert!(Instant::now() < deadline, "run did not start: {}", launcher.stderr());
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_until(&launcher, "run did not start", Duration::from_secs(60), || rows_written(&dir) >= 19);
     let pid = pid_of(&err, "grains-oracle");
     let killed = Instant::now();
     // SAFETY: kill(2) on a child of our child, by pid.

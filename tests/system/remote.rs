@@ -121,11 +121,9 @@ fn an_mpm_in_another_network_namespace_gives_the_same_physics_and_its_death_ends
     let printed = printed_command(&mut launcher, "mpm");
     let mut mpm = ns.start(&printed);
     let dir = run_dir(&launcher.stderr());
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < 20 {
-        assert!(Instant::now() < deadline, "the run did not start: {}", launcher.stderr());
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_until(&launcher, "the run did not start", Duration::from_secs(60), || {
+        rows_written(&dir) >= 19
+    });
     mpm.child.kill().expect("SIGKILL the remote MPM");
     let killed = Instant::now();
     let status = launcher.wait_exit(Duration::from_secs(30));

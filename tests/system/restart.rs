@@ -5,7 +5,7 @@
 use super::run_to_end;
 use grains_system_tests::*;
 use std::path::Path;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The physics of a finished run: `metrics.csv` without its timings, every frame's bytes
 /// (by file name), and `walls.csv` if there is one.
@@ -93,11 +93,12 @@ fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
         // Killed once the first checkpoint is complete and the run has gone on past it, so
         // that rows after the checkpoint must be dropped.
         let manifest = dir.join(format!("checkpoints/{every:010}/manifest.json"));
-        let deadline = Instant::now() + Duration::from_secs(120);
-        while !manifest.exists() || std::fs::read_to_string(dir.join("metrics.csv.part")).map_or(0, |t| t.lines().count()) < every + 20 {
-            assert!(Instant::now() < deadline, "{scene}: no checkpoint: {}", launcher.stderr());
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        wait_until(
+            &launcher,
+            &format!("{scene}: a checkpoint and rows past it"),
+            Duration::from_secs(120),
+            || manifest.exists() && rows_written(&dir) >= every + 19,
+        );
         let rows = match victim {
             None => {
                 launcher.child.kill().expect("SIGKILL the launcher");
@@ -165,11 +166,9 @@ fn a_run_without_a_checkpoint_or_still_going_is_not_resumed() {
         "100",
     ]);
     let dir = run_dir(&running.wait_for("started as processes", Duration::from_secs(60)));
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !dir.join("checkpoints/0000000100/manifest.json").exists() {
-        assert!(Instant::now() < deadline, "no checkpoint: {}", running.stderr());
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    wait_until(&running, "no checkpoint", Duration::from_secs(60), || {
+        dir.join("checkpoints/0000000100/manifest.json").exists()
+    });
     let (status, err) = run_to_end(&["resume", dir.to_str().unwrap(), "--quiet"]);
     assert_eq!(status.code(), Some(2), "{err}");
     assert!(err.contains("still going"), "{err}");
