@@ -171,6 +171,14 @@ pub enum BenchCmd {
     Mpm(grains_launch::bench::mpm::MpmArgs),
     /// Yue 2018 §5's speed-up study: the periodic chute over grain size, DEM fraction and cell.
     Chute(grains_launch::bench::chute::ChuteArgs),
+    /// What remote access costs a run: no bridge, a bridge, a client that never reads.
+    Bridge(grains_launch::bench::bridge::BridgeArgs),
+    /// The client that never reads, for `bench bridge` (a process of its own).
+    #[command(hide = true)]
+    StalledClient {
+        #[command(flatten)]
+        remote: grains_launch::remote::Remote,
+    },
 }
 
 fn parse_role(s: &str) -> Result<Role, String> {

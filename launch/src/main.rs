@@ -34,6 +34,15 @@ fn main() -> ExitCode {
         Cmd::Bench {
             what: BenchCmd::Chute(args),
         } => bench::chute::bench(&args).map(|()| 0),
+        Cmd::Bench {
+            what: BenchCmd::Bridge(args),
+        } => bench::bridge::bench(&args).map(|()| 0),
+        Cmd::Bench {
+            what: BenchCmd::StalledClient { remote },
+        } => remote
+            .endpoint()
+            .and_then(|ep| grains_bridge::client::stalled_viewer(&ep, std::time::Duration::from_secs(60)))
+            .map(|never| match never {}),
     };
     match result {
         Ok(code) => ExitCode::from(code),

@@ -3,8 +3,9 @@
 //! ratio: [`ipc`] (transport cost per macro-step, iceoryx2 processes against threads),
 //! [`dem`] (µs per grain-step beside LAMMPS), [`mpm`] (µs per point-step beside Taichi),
 //! [`hybrid`] (the hybrid column against the pure DEM one), [`chute`] (Yue 2018 §5's speed-up
-//! study on the periodic chute). [`machine`] measures the machine itself.
+//! study on the periodic chute), [`bridge`] (what remote access costs a run). [`machine`] measures the machine itself.
 
+pub mod bridge;
 pub mod chute;
 pub mod dem;
 pub mod hybrid;

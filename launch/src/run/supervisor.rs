@@ -187,6 +187,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
     pub(super) fn run(mut self) -> anyhow::Result<(RunOutcome, serde_json::Value)> {
         let n_spawned = self.parts.pids().len();
         loop {
+            let turn = Instant::now();
             self.admit()?;
             self.collect_summaries(WAIT)?;
             self.record_checkpoints()?;
@@ -208,6 +209,7 @@ impl<'a, T: Transport> Supervisor<'a, T> {
                 self.follow_acks()?;
                 break;
             }
+            std::thread::sleep(names::SUMMARY_READ_TURN.saturating_sub(turn.elapsed()));
         }
         self.finish()
     }

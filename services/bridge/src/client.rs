@@ -176,3 +176,32 @@ pub fn monitor(ep: &Endpoint, run: &str, rows: Option<u64>, out: &mut impl Write
     let _ = session.close().wait();
     Ok(())
 }
+
+/// A client of every run at `ep` that subscribes to the views and never takes them off its
+/// socket: its callback blocks on the first sample for good. It is what `grains bench bridge`
+/// measures the run against. Tries to connect for up to `wait` (the bridge may not be up
+/// yet), prints `subscribed` on stdout once the subscription stands, and never returns.
+pub fn stalled_viewer(ep: &Endpoint, wait: Duration) -> anyhow::Result<std::convert::Infallible> {
+    let deadline = Instant::now() + wait;
+    let session = loop {
+        match ep.open() {
+            Ok(s) => break s,
+            Err(e) if Instant::now() >= deadline => return Err(e),
+            Err(_) => std::thread::sleep(Duration::from_millis(50)),
+        }
+    };
+    let _sub = session
+        .declare_subscriber("grains/*/state/view/*")
+        .callback(|_| {
+            loop {
+                std::thread::park();
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("subscribing to the views: {e}"))?;
+    println!("subscribed");
+    std::io::stdout().flush()?;
+    loop {
+        std::thread::park();
+    }
+}

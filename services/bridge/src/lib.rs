@@ -80,6 +80,7 @@ pub fn serve<T: Transport>(
     let served = (|| -> anyhow::Result<()> {
         let mut bridge = Bridge::new(&mut ports, cfg, run, scene, effective, Outgoing(out_tx));
         while !stop.is_set() {
+            let turn = Instant::now();
             bridge.take_summaries()?;
             bridge.take_views()?;
             bridge.take_acks()?;
@@ -93,6 +94,7 @@ pub fn serve<T: Transport>(
             if bridge.run_has_ended(t) {
                 break;
             }
+            std::thread::sleep(names::SUMMARY_READ_TURN.saturating_sub(turn.elapsed()));
         }
         bridge.shut_down()
     })();

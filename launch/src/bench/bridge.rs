@@ -1,0 +1,142 @@
+//! `grains bench bridge`: what remote access costs a run. The same scene runs without a
+//! bridge, with a bridge and no client, and with a bridge and a client that subscribes to the
+//! views and never reads them (`grains_bridge::client::stalled_viewer`, a child process
+//! stopped with SIGSTOP once its buffers are full), alternating, fastest of the repeats each
+//! (the machine is shared: the fastest run is the least disturbed). Figures: wall time of the
+//! stepping (release to last row) and of the whole run (start to end, so a bridge that holds up
+//! the run's start or end shows), and their ratios to the run without a bridge.
+
+use crate::run::{RunOptions, RunOutcome, Status, TransportKind, run};
+use anyhow::{Context, bail};
+use std::io::{BufRead, Write};
+use std::path::PathBuf;
+use std::time::Duration;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct BridgeArgs {
+    /// The scene (its views: up to 5,000 grains and points, 5 a second).
+    #[arg(long, default_value = "scenes/quickstart_hybrid_2d.toml")]
+    pub scene: PathBuf,
+    /// Simulated time of every run [s] (`run.duration`).
+    #[arg(long, default_value_t = 0.05)]
+    pub duration: f64,
+    /// Runs of each kind (the fastest is reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeats: usize,
+    /// Extra `--set` overrides of the scene.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub overrides: Vec<String>,
+    /// Where the runs and the result table go.
+    #[arg(long, default_value = "out/bench/bridge")]
+    pub out: PathBuf,
+}
+
+/// The kinds of run, in the order they alternate.
+const KINDS: [&str; 3] = ["no bridge", "bridge, no client", "bridge, a client that never reads"];
+
+/// A loopback endpoint on a port that was free a moment ago.
+fn free_endpoint() -> anyhow::Result<String> {
+    let l = std::net::TcpListener::bind("127.0.0.1:0")?;
+    Ok(format!("tcp/127.0.0.1:{}", l.local_addr()?.port()))
+}
+
+/// Starts the stalled client against `connect` (it waits for the bridge), and stops it with
+/// SIGSTOP a second after it subscribed: by then the views have filled what its socket and
+/// zenoh buffer, and a stopped process takes no CPU from the run.
+fn stalled_client(connect: &str) -> anyhow::Result<(std::process::Child, std::thread::JoinHandle<anyhow::Result<()>>)> {
+    let mut child = std::process::Command::new(std::env::current_exe()?)
+        .args(["bench", "stalled-client", "--connect", connect])
+        .stdout(std::process::Stdio::piped())
+        // Its zenoh warns of every try before the bridge listens; a failure shows as no
+        // "subscribed" line.
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .context("starting the stalled client")?;
+    let stdout = child.stdout.take().expect("piped");
+    let pid = child.id() as i32;
+    let stopper = std::thread::spawn(move || {
+        let mut line = String::new();
+        std::io::BufReader::new(stdout).read_line(&mut line)?;
+        if line.trim() != "subscribed" {
+            bail!("the stalled client did not subscribe: {line:?}");
+        }
+        std::thread::sleep(Duration::from_secs(1));
+        // SAFETY: kill(2) on our own child, by pid.
+        if unsafe { libc::kill(pid, libc::SIGSTOP) } != 0 {
+            bail!("cannot stop the stalled client: {}", std::io::Error::last_os_error());
+        }
+        Ok(())
+    });
+    Ok((child, stopper))
+}
+
+fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
+    let connect = free_endpoint()?;
+    let bridge = (kind > 0).then(|| grains_bridge::config::BridgeArgs {
+        config: None,
+        listen: vec![connect.clone()],
+        steering: false,
+        rate: None,
+    });
+    let client = if kind == 2 { Some(stalled_client(&connect)?) } else { None };
+    let mut overrides = vec![format!("run.duration={}", args.duration), "output.frames_every=0".to_string()];
+    overrides.extend(args.overrides.iter().cloned());
+    let started = std::time::Instant::now();
+    let outcome: anyhow::Result<RunOutcome> = run(&RunOptions {
+        bridge,
+        resume: None,
+        zenoh_listen: None,
+        scene_path: args.scene.clone(),
+        transport: TransportKind::Ipc,
+        external: Vec::new(),
+        out_root: args.out.join("runs"),
+        progress: false,
+        overrides,
+        announce: false,
+    });
+    let whole = started.elapsed().as_secs_f64();
+    if let Some((mut child, stopper)) = client {
+        let _ = child.kill();
+        let _ = child.wait();
+        stopper.join().expect("the stopper thread")?;
+    }
+    let outcome = outcome?;
+    if outcome.status != Status::Completed {
+        bail!("{}: the run did not complete: {}", KINDS[kind], outcome.message);
+    }
+    let _ = std::fs::remove_dir_all(&outcome.dir);
+    Ok((outcome.stepping.as_secs_f64(), whole))
+}
+
+pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out)?;
+    let mut best = [(f64::INFINITY, f64::INFINITY); 3];
+    for r in 0..args.repeats {
+        for (k, b) in best.iter_mut().enumerate() {
+            tracing::info!("bench bridge: repeat {}/{}, {} ...", r + 1, args.repeats, KINDS[k]);
+            let (stepping, whole) = one(args, k)?;
+            *b = (b.0.min(stepping), b.1.min(whole));
+        }
+    }
+    let mut out = format!(
+        "machine: {} cores; {} for {} s, {} runs of each kind alternating, fastest of each\n\n\
+         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge |\n|---|---:|---:|---:|---:|\n",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        args.scene.display(),
+        args.duration,
+        args.repeats,
+    );
+    for (k, (s, w)) in best.iter().enumerate() {
+        out.push_str(&format!(
+            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} |\n",
+            KINDS[k],
+            s / best[0].0,
+            w / best[0].1
+        ));
+    }
+    println!("{out}");
+    let table = args.out.join("bridge.md");
+    std::fs::File::create(&table)?.write_all(out.as_bytes())?;
+    tracing::info!("bench bridge: table written to {}", table.display());
+    Ok(())
+}
