@@ -20,8 +20,10 @@ fn main() -> ExitCode {
         Cmd::Pack(args) => grains_launch::pack::pack(&args).map(|()| 0),
         Cmd::Calibrate(args) => grains_launch::calibrate::calibrate(&args).map(|()| 0),
         Cmd::Check { scene } => run::check(&scene).map(|()| 0),
-        Cmd::Render(args) => grains_launch::render::render(&args).map(|path| {
-            println!("{}", path.display());
+        Cmd::Render(args) => grains_launch::render::render(&args).map(|paths| {
+            for p in paths {
+                println!("{}", p.display());
+            }
             0
         }),
         Cmd::Validate(args) => validate::validate(&args).map(|ok| if ok { 0 } else { 1 }),

@@ -14,10 +14,17 @@ pub struct RenderArgs {
     /// A run's output directory (`out/<scene>/<run-id>`).
     pub run: PathBuf,
     /// The frame's macro-step (default: the last frame written).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "every")]
     pub step: Option<u64>,
-    /// The PNG to write (default `<run>/frames/render_<step>.png`).
-    #[arg(long)]
+    /// Every K-th frame written, to `<run>/render/frame_<step>.png`, and with `ffmpeg` on the
+    /// PATH the film `<run>/render/render.mp4`.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: Option<u64>,
+    /// Frames per second of the film.
+    #[arg(long, default_value_t = 10)]
+    pub fps: u32,
+    /// The PNG to write (default `<run>/frames/render_<step>.png`; not with `--every`).
+    #[arg(long, conflicts_with = "every")]
     pub out: Option<PathBuf>,
     /// Width of the picture [pixels]; the height follows the domain's aspect.
     #[arg(long, default_value_t = 1200)]
@@ -32,9 +39,10 @@ pub struct RenderArgs {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Colour {
-    /// Material points blue, grains sand.
+    /// Which model: material points blue, grains sand (where the oracle put the continuum).
     Model,
-    /// Speed |v|, from dark blue (at rest) to yellow (the fastest material of the frame).
+    /// Speed |v|, from dark blue (at rest) to yellow (the fastest material of the frame, or of
+    /// all the frames drawn with `--every`).
     Speed,
 }
 
@@ -48,19 +56,111 @@ pub struct Scene2 {
     pub points: Vec<([f64; 2], f64, f64)>,
 }
 
+impl Scene2 {
+    /// The fastest material's speed [m/s].
+    pub fn fastest(&self) -> f64 {
+        self.grains.iter().chain(&self.points).map(|m| m.2).fold(0.0, f64::max)
+    }
+}
+
 const BACKGROUND: RGBColor = RGBColor(255, 255, 255);
 const SAND: RGBColor = RGBColor(194, 138, 64);
 const CONTINUUM: RGBColor = RGBColor(70, 130, 200);
 
-/// `grains render`: reads the frame and writes the picture; returns its path.
-pub fn render(args: &RenderArgs) -> anyhow::Result<PathBuf> {
-    let scene = grains_protocol::scene::load(&args.run.join("scene.toml"))
-        .with_context(|| format!("{}: not a run directory (it needs the run's scene.toml)", args.run.display()))?;
-    let step = match args.step {
-        Some(s) => s,
-        None => last_step(&args.run)?,
+/// `grains render`: reads the frames and writes the pictures (and the film); returns what it
+/// wrote.
+pub fn render(args: &RenderArgs) -> anyhow::Result<Vec<PathBuf>> {
+    let view = match args.view.as_deref() {
+        Some(&[x0, y0, x1, y1]) if x1 > x0 && y1 > y0 => Some(([x0, y0], [x1, y1])),
+        Some(v) => bail!("--view {v:?}: give xmin,ymin,xmax,ymax with xmax > xmin and ymax > ymin"),
+        None => None,
     };
-    let frames = args.run.join("frames");
+    let Some(every) = args.every else {
+        let step = match args.step {
+            Some(s) => s,
+            None => *frame_steps(&args.run)?.last().expect("frame_steps is never empty"),
+        };
+        let picture = frame(&args.run, step, view)?;
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| args.run.join("frames").join(format!("render_{step:08}.png")));
+        let fastest = picture.fastest();
+        write_png(&picture, args.colour, fastest, args.width, &out)?;
+        return Ok(vec![out]);
+    };
+    let steps: Vec<u64> = frame_steps(&args.run)?.into_iter().step_by(every as usize).collect();
+    // One speed scale for the whole film: a colour means the same speed in every picture.
+    let fastest = match args.colour {
+        Colour::Speed => steps
+            .iter()
+            .map(|&s| frame(&args.run, s, view).map(|f| f.fastest()))
+            .try_fold(0.0, |m, f| f.map(|f| f64::max(m, f)))?,
+        Colour::Model => 0.0,
+    };
+    let dir = args.run.join("render");
+    // Pictures of an earlier render would join the film.
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).with_context(|| format!("removing the earlier {}", dir.display()))?;
+    }
+    let mut written = Vec::new();
+    for (k, &step) in steps.iter().enumerate() {
+        let out = dir.join(format!("frame_{step:08}.png"));
+        write_png(&frame(&args.run, step, view)?, args.colour, fastest, args.width, &out)?;
+        tracing::info!("render: {}/{} pictures", k + 1, steps.len());
+        written.push(out);
+    }
+    match film(&dir, args.fps)? {
+        Some(mp4) => written.push(mp4),
+        None => tracing::info!("render: no ffmpeg on the PATH: pictures only (install ffmpeg for the film)"),
+    }
+    Ok(written)
+}
+
+/// The film of the pictures `frame_*.png` in `dir`, in their order, by `ffmpeg` (H.264,
+/// padded to even sizes as the codec needs); `None` without ffmpeg.
+fn film(dir: &Path, fps: u32) -> anyhow::Result<Option<PathBuf>> {
+    let out = dir.join("render.mp4");
+    let status = std::process::Command::new("ffmpeg")
+        .args([
+            "-loglevel",
+            "error",
+            "-y",
+            "-framerate",
+            &fps.to_string(),
+            "-pattern_type",
+            "glob",
+            "-i",
+        ])
+        .arg(dir.join("frame_*.png"))
+        .args([
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2:color=white",
+            "-c:v",
+            "libx264",
+            "-pix_fmt",
+            "yuv420p",
+        ])
+        .arg(&out)
+        .status();
+    match status {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(e).context("starting ffmpeg"),
+        Ok(s) if s.success() => Ok(Some(out)),
+        Ok(s) => bail!(
+            "ffmpeg failed ({s}) making {} from the pictures in {}",
+            out.display(),
+            dir.display()
+        ),
+    }
+}
+
+/// The picture of step `step` of a run: its grains and points, in `view` (default the
+/// scene's domain).
+pub fn frame(run: &Path, step: u64, view: Option<([f64; 2], [f64; 2])>) -> anyhow::Result<Scene2> {
+    let scene = grains_protocol::scene::load(&run.join("scene.toml"))
+        .with_context(|| format!("{}: not a run directory (it needs the run's scene.toml)", run.display()))?;
+    let frames = run.join("frames");
     let read = |name: &str| -> anyhow::Result<Option<Frame>> {
         let file = frames.join(format!("{name}_{step:08}.vtu"));
         if file.exists() { Frame::read(&file).map(Some) } else { Ok(None) }
@@ -74,46 +174,101 @@ pub fn render(args: &RenderArgs) -> anyhow::Result<PathBuf> {
     }
     let point_half = 0.5 * scene.domain.cell_size / scene.mpm.points_per_axis as f64;
     let d = &scene.domain;
-    let (min, max) = match args.view.as_deref() {
-        Some(&[x0, y0, x1, y1]) if x1 > x0 && y1 > y0 => ([x0, y0], [x1, y1]),
-        Some(v) => bail!("--view {v:?}: give xmin,ymin,xmax,ymax with xmax > xmin and ymax > ymin"),
-        None => ([d.min[0], d.min[1]], [d.max[0], d.max[1]]),
-    };
-    let view = Scene2 {
+    let (min, max) = view.unwrap_or(([d.min[0], d.min[1]], [d.max[0], d.max[1]]));
+    Ok(Scene2 {
         min,
         max,
         grains: grains.map_or(Ok(Vec::new()), |f| material(&f, None))?,
         points: points.map_or(Ok(Vec::new()), |f| material(&f, Some(point_half)))?,
-    };
-    let out = args.out.clone().unwrap_or_else(|| frames.join(format!("render_{step:08}.png")));
+    })
+}
+
+/// Draws `view` into the PNG `out`, `width` pixels across; speeds are coloured against
+/// `fastest`.
+pub fn write_png(view: &Scene2, colour: Colour, fastest: f64, width: u32, out: &Path) -> anyhow::Result<()> {
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir)?;
     }
-    {
-        let root = BitMapBackend::new(&out, size(&view, args.width)).into_drawing_area();
-        draw(&view, args.colour, &root).with_context(|| format!("writing {}", out.display()))?;
-    }
-    Ok(out)
+    let root = BitMapBackend::new(out, size(view, width)).into_drawing_area();
+    draw(view, colour, fastest, &root).with_context(|| format!("writing {}", out.display()))
 }
 
-/// The step of the last frame of a run (grains or points).
-fn last_step(run: &Path) -> anyhow::Result<u64> {
-    let mut last = None;
+/// Height of the label strip over each panel [pixels].
+const LABEL: u32 = 26;
+
+/// A grid of labelled pictures (`rows` of panels, each `width` pixels across, all of the
+/// first panel's aspect) in the PNG `out`, for side-by-side comparisons (`grains validate`).
+pub fn panels(rows: &[Vec<(String, Scene2)>], colour: Colour, width: u32, out: &Path) -> anyhow::Result<()> {
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let root = BitMapBackend::new(out, panels_size(rows, width)?).into_drawing_area();
+    draw_panels(rows, colour, width, &root).with_context(|| format!("writing {}", out.display()))
+}
+
+/// The size of [`panels`]' picture.
+pub fn panels_size(rows: &[Vec<(String, Scene2)>], width: u32) -> anyhow::Result<(u32, u32)> {
+    let first = &rows.first().and_then(|r| r.first()).context("no panel to draw")?.1;
+    let cols = rows.iter().map(Vec::len).max().unwrap_or(1) as u32;
+    let (w, h) = size(first, width);
+    Ok((cols * w, rows.len() as u32 * (h + LABEL)))
+}
+
+/// Draws [`panels`]' grid on `root`; speeds are coloured against the fastest material of all
+/// the panels.
+pub fn draw_panels<DB: DrawingBackend>(
+    rows: &[Vec<(String, Scene2)>],
+    colour: Colour,
+    width: u32,
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+) -> anyhow::Result<()> {
+    let first = &rows.first().and_then(|r| r.first()).context("no panel to draw")?.1;
+    let (w, h) = size(first, width);
+    let fastest = rows.iter().flatten().map(|(_, v)| v.fastest()).fold(0.0, f64::max);
+    crate::report::chart::font()?;
+    let fail = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing: {e}");
+    root.fill(&BACKGROUND).map_err(fail)?;
+    for (r, row) in rows.iter().enumerate() {
+        for (c, (label, view)) in row.iter().enumerate() {
+            let (x, y) = (c as u32 * w, r as u32 * (h + LABEL));
+            let cell = root.clone().shrink((x, y), (w, h + LABEL));
+            cell.draw_text(label, &("sans-serif", 18).into_font().color(&BLACK), (6, 4))
+                .map_err(fail)?;
+            draw(view, colour, fastest, &cell.clone().shrink((0, LABEL), (w, h)))?;
+        }
+    }
+    root.present().map_err(fail)?;
+    Ok(())
+}
+
+/// The macro-steps of a run's frames (grains or points), in order; an error if there is none.
+pub fn frame_steps(run: &Path) -> anyhow::Result<Vec<u64>> {
+    Ok(frame_times(run)?.into_iter().map(|(_, s)| s).collect())
+}
+
+/// The (time [s], macro-step) of a run's frames (grains or points), in order of step; an
+/// error if there is none.
+pub fn frame_times(run: &Path) -> anyhow::Result<Vec<(f64, u64)>> {
+    let mut steps = std::collections::BTreeMap::new();
     for name in ["grains", "points"] {
         let pvd = run.join("frames").join(format!("{name}.pvd"));
-        if pvd.exists()
-            && let Some((_, file)) = collection(&pvd)?.pop()
-        {
+        if !pvd.exists() {
+            continue;
+        }
+        for (time, file) in collection(&pvd)? {
             let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("");
             let step: u64 = stem
                 .rsplit('_')
                 .next()
                 .and_then(|s| s.parse().ok())
-                .context("a frame file without its step")?;
-            last = last.max(Some(step));
+                .with_context(|| format!("{}: a frame file without its step", file.display()))?;
+            steps.insert(step, time);
         }
     }
-    last.with_context(|| format!("{}: the run wrote no frames", run.display()))
+    if steps.is_empty() {
+        bail!("{}: the run wrote no frames", run.display());
+    }
+    Ok(steps.into_iter().map(|(s, t)| (t, s)).collect())
 }
 
 /// The material of a frame: grains with their `radius`, or points with `half` their spacing.
@@ -143,8 +298,14 @@ pub fn size(view: &Scene2, width: u32) -> (u32, u32) {
     (width.max(16), ((width as f64 * aspect).round() as u32).max(16))
 }
 
-/// Draws the view on `root` (a picture of [`size`] pixels).
-pub fn draw<DB: DrawingBackend>(view: &Scene2, colour: Colour, root: &DrawingArea<DB, plotters::coord::Shift>) -> anyhow::Result<()> {
+/// Draws the view on `root` (a picture of [`size`] pixels); speeds are coloured against
+/// `fastest`.
+pub fn draw<DB: DrawingBackend>(
+    view: &Scene2,
+    colour: Colour,
+    fastest: f64,
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+) -> anyhow::Result<()> {
     let (w, _) = root.dim_in_pixel();
     let scale = w as f64 / (view.max[0] - view.min[0]);
     let at = |x: [f64; 2]| {
@@ -153,7 +314,6 @@ pub fn draw<DB: DrawingBackend>(view: &Scene2, colour: Colour, root: &DrawingAre
             (((view.max[1] - x[1]) * scale).round() as i32),
         )
     };
-    let fastest = view.grains.iter().chain(&view.points).map(|m| m.2).fold(0.0, f64::max);
     let paint = |base: RGBColor, speed: f64| match colour {
         Colour::Model => base,
         Colour::Speed => ramp(if fastest > 0.0 { speed / fastest } else { 0.0 }),
@@ -194,6 +354,39 @@ fn ramp(t: f64) -> RGBColor {
 mod tests {
     use super::*;
 
+    /// Two panels side by side, one grain each: each disk is drawn in its own panel, under its
+    /// label strip, at its place in that panel's view, and not in the other panel.
+    #[test]
+    fn panels_put_each_view_in_its_own_cell() {
+        let view = |x: [f64; 2]| Scene2 {
+            min: [0.0, 0.0],
+            max: [0.1, 0.075],
+            grains: vec![(x, 0.002, 0.0)],
+            points: Vec::new(),
+        };
+        let rows = vec![vec![("a".to_string(), view([0.025, 0.05])), ("b".to_string(), view([0.07, 0.02]))]];
+        let (w, h) = panels_size(&rows, 1000).unwrap();
+        assert_eq!((w, h), (2000, 750 + LABEL));
+        let mut px = vec![0u8; (w * h * 3) as usize];
+        draw_panels(
+            &rows,
+            Colour::Model,
+            1000,
+            &BitMapBackend::with_buffer(&mut px, (w, h)).into_drawing_area(),
+        )
+        .unwrap();
+        let sand = |x: u32, y: u32| {
+            let k = 3 * (y * w + x) as usize;
+            (px[k], px[k + 1], px[k + 2]) == (SAND.0, SAND.1, SAND.2)
+        };
+        // At 1000 px across 0.1 m: (0.025, 0.05) is pixel (250, 250) of panel a, (0.07, 0.02)
+        // pixel (700, 550) of panel b, which starts 1000 px to the right.
+        assert!(sand(250, LABEL + 250) && sand(1700, LABEL + 550));
+        assert!(!sand(700, LABEL + 550) && !sand(1250, LABEL + 250));
+        // The label strips hold no material.
+        assert!((0..w).all(|x| (0..LABEL).all(|y| !sand(x, y))));
+    }
+
     /// Two grains of known radii: two disks of the right pixel radius at the right places,
     /// nothing else painted. At 1000 px across a 0.1 m view, 1 px = 0.1 mm: a grain of 2 mm
     /// at (0.025, 0.05) is a disk of radius 20 px centred on pixel (250, 250), one of 1 mm at
@@ -212,6 +405,7 @@ mod tests {
         draw(
             &view,
             Colour::Model,
+            0.0,
             &BitMapBackend::with_buffer(&mut px, (w, h)).into_drawing_area(),
         )
         .unwrap();

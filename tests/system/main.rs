@@ -5,6 +5,7 @@ mod bridge;
 mod calibrate;
 mod oracle;
 mod remote;
+mod render;
 mod restart;
 mod steps;
 

@@ -78,7 +78,7 @@ const COLOURS: [RGBColor; 8] = [
 
 /// Registers the chart font once per process: DejaVu Sans, built into the binary (the
 /// `dejavu` crate), so that charts need nothing from the machine.
-fn font() -> anyhow::Result<()> {
+pub(crate) fn font() -> anyhow::Result<()> {
     static FONT: OnceLock<Result<(), String>> = OnceLock::new();
     FONT.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())

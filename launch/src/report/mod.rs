@@ -27,6 +27,8 @@ pub struct Part {
     pub checks: Vec<Check>,
     /// File stem and caption of each chart written into the report's directory.
     pub charts: Vec<(String, String)>,
+    /// File stem and caption of each picture of the runs (a PNG in the report's directory).
+    pub pictures: Vec<(String, String)>,
 }
 
 impl Part {
@@ -87,6 +89,9 @@ pub fn markdown(title: &str, preamble: &str, parts: &[Part]) -> String {
         md.push('\n');
         md.push_str(p.md.trim_end());
         md.push('\n');
+        for (stem, caption) in &p.pictures {
+            let _ = writeln!(md, "\n![{caption}]({stem}.png)\n\n*{caption}*");
+        }
         for (stem, caption) in &p.charts {
             let _ = writeln!(
                 md,

@@ -151,11 +151,17 @@ fn gcd(a: u64, b: u64) -> u64 {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
+/// Simulated time of the runs of a column of aspect `a` [s]: six free-fall times of its
+/// height, at least 0.3 s.
+fn duration(a: f64) -> f64 {
+    (6.0 * (a * L0 / 9.81).sqrt()).max(0.3)
+}
+
 /// Runs a scene to the end with a frame at the last step; first-row counts and wall time.
 pub fn run_case(args: &ValidateArgs, scene: &str, packing: &Path, a: f64, extra: &[String]) -> anyhow::Result<RunResult> {
     let path = args.scenes.join(scene);
     let top = BOTTOM + a * L0;
-    let duration = (6.0 * (a * L0 / 9.81).sqrt()).max(0.3);
+    let duration = duration(a);
     let mut overrides = vec![
         format!("body.0.max=[{L0},{top}]"),
         format!("body.0.packing={:?}", packing.display().to_string()),
@@ -374,7 +380,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
 /// The MPM column of aspect ratio `a` (its material from the floor up: no glued row).
 fn run_mpm_case(args: &ValidateArgs, a: f64) -> anyhow::Result<RunResult> {
     let path = args.scenes.join(MPM);
-    let duration = (6.0 * (a * L0 / 9.81).sqrt()).max(0.3);
+    let duration = duration(a);
     let mut overrides = vec![format!("body.0.max=[{L0},{}]", a * L0), format!("run.duration={duration:.2}")];
     let steps = load_with(&path, &overrides)?.steps;
     overrides.push(format!("output.frames_every={steps}"));
@@ -399,6 +405,27 @@ fn column_outputs(args: &ValidateArgs, cases: &[Case], summaries: &[Summary], pi
             &c.dem.dir,
         )?;
         let _ = writeln!(md, "\n### What each run simulates\n\n{SCENE_USE_HEADER}\n{row}");
+        let mut runs = vec![("DEM", c.dem.dir.as_path()), ("hybrid", c.hybrid.dir.as_path())];
+        if let Some(m) = &c.mpm {
+            runs.push(("MPM", m.dir.as_path()));
+        }
+        let reach = [c.front_dem, c.front_hybrid, c.front_mpm]
+            .into_iter()
+            .filter(|f| f.is_finite())
+            .fold(L0, f64::max);
+        let top = BOTTOM + c.aspect * L0;
+        super::pictures::side_by_side(
+            &mut part,
+            &args.out,
+            "column_pictures",
+            &format!(
+                "Column a = {}, packing {}: at the start and the end of the runs",
+                c.aspect, c.packing
+            ),
+            &runs,
+            &[0.0, duration(c.aspect)],
+            Some(([0.0, 0.0], [1.15 * reach, 1.15 * top])),
+        )?;
     }
     if !piles.is_empty() {
         let _ = write!(

@@ -140,6 +140,16 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<crate::report::Part> {
     let row = scene_use(args, &mut part, "drum_use", SCENE, &hybrid.dir, &dem.dir)?;
     writeln!(md, "\n### What each run simulates\n\n{}\n{row}", SCENE_USE_HEADER)?;
     tracing::info!("validate: drum: DEM {:.1}°, hybrid {:.1}°", dem.angle, hybrid.angle);
+    let end = scene.steps as f64 * scene.dt;
+    super::pictures::side_by_side(
+        &mut part,
+        &args.out,
+        "drum_pictures",
+        "Drum: DEM and hybrid at the same moments",
+        &[("DEM", dem.dir.as_path()), ("hybrid", hybrid.dir.as_path())],
+        &[0.0, 0.5 * end, end],
+        None,
+    )?;
     part.md = md;
     Ok(part)
 }

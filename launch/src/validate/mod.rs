@@ -10,7 +10,8 @@
 //! - [`cost`]: error against wall time, with the Pareto front.
 //!
 //! Below the parts: [`runs`] (running scenes, reading what a run did), [`packings`] (every
-//! packing poured, in one place), [`deposit`] (frames and deposits read back), [`scenes`]
+//! packing poured, in one place), [`deposit`] (frames and deposits read back), [`pictures`]
+//! (the runs drawn side by side), [`scenes`]
 //! (the scenes and their geometry), [`stats`]. Nothing below a part depends on a part.
 //!
 //! Everything goes to `--out` (default `out/validate/<date>`): `report.md` opens with every
@@ -24,6 +25,7 @@ pub mod cost;
 pub mod deposit;
 pub mod drum;
 pub mod packings;
+pub mod pictures;
 pub mod runs;
 pub mod scenes;
 pub mod silo;
@@ -68,8 +70,10 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<bool> {
     if let Some(dir) = &args.publish {
         std::fs::create_dir_all(dir)?;
         std::fs::write(dir.join("report.md"), &md)?;
-        for (stem, _) in parts.iter().flat_map(|p| &p.charts) {
-            for ext in ["png", "svg", "csv"] {
+        let charts = parts.iter().flat_map(|p| &p.charts).map(|(s, _)| (s, &["png", "svg", "csv"][..]));
+        let pictures = parts.iter().flat_map(|p| &p.pictures).map(|(s, _)| (s, &["png"][..]));
+        for (stem, exts) in charts.chain(pictures) {
+            for ext in exts {
                 let name = format!("{stem}.{ext}");
                 std::fs::copy(args.out.join(&name), dir.join(&name)).with_context(|| format!("publishing {name}"))?;
             }

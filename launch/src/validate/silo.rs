@@ -299,6 +299,21 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     clogging_section(&mut md, &mut part, &all)?;
     bouncing_section(&mut md, &scene, &all)?;
     discharge_outputs(&mut md, &mut part, args, &all)?;
+    let runs: Vec<(&str, &Path)> = all
+        .runs
+        .iter()
+        .filter(|r| r.orifice == REFERENCE)
+        .map(|r| (r.model.name(), r.dir.as_path()))
+        .collect();
+    super::pictures::side_by_side(
+        &mut part,
+        &args.out,
+        "silo_pictures",
+        &format!("Silo, orifice {:.0} mm: each model at the same moments", REFERENCE * 1e3),
+        &runs,
+        &[0.0, 0.25, 0.5],
+        None,
+    )?;
     part.md = md;
     Ok(part)
 }

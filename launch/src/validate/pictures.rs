@@ -1,0 +1,47 @@
+//! The runs of a part drawn side by side: one column per run (DEM, hybrid, MPM), one row per
+//! moment, each run's frame nearest that moment, all in the same view; grains sand, material
+//! points blue, so that the hybrid's zones show.
+
+use crate::render::{Colour, Scene2, frame, frame_times, panels};
+use crate::report::Part;
+use std::path::Path;
+
+/// Pixels across one panel.
+const PANEL: u32 = 420;
+
+/// Draws `runs` (label, run directory) at `times` [s] into `<out>/<stem>.png` and lists it
+/// under `part`. A run without a frame near a moment (within a quarter of the spacing of the
+/// moments, or 0.05 s for one moment) leaves its panel out: it is not drawn at another time.
+pub fn side_by_side(
+    part: &mut Part,
+    out: &Path,
+    stem: &str,
+    caption: &str,
+    runs: &[(&str, &Path)],
+    times: &[f64],
+    view: Option<([f64; 2], [f64; 2])>,
+) -> anyhow::Result<()> {
+    let slack = match times {
+        [a, b, ..] => 0.25 * (b - a).abs(),
+        _ => 0.05,
+    };
+    let mut rows = Vec::new();
+    for &t in times {
+        let mut row: Vec<(String, Scene2)> = Vec::new();
+        for (label, dir) in runs {
+            let nearest = frame_times(dir)?
+                .into_iter()
+                .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+                .filter(|(ft, _)| (ft - t).abs() <= slack);
+            if let Some((ft, step)) = nearest {
+                row.push((format!("{label}, t = {ft:.2} s"), frame(dir, step, view)?));
+            }
+        }
+        if !row.is_empty() {
+            rows.push(row);
+        }
+    }
+    panels(&rows, Colour::Model, PANEL, &out.join(format!("{stem}.png")))?;
+    part.pictures.push((stem.to_string(), caption.to_string()));
+    Ok(())
+}
