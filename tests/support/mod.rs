@@ -281,3 +281,24 @@ impl Drop for FileLock {
         unsafe { libc::flock(self.0.as_raw_fd(), libc::LOCK_UN) };
     }
 }
+
+/// Makes sure `program` runs (`<program> <probe>` starts), installing Debian's `package` if
+/// not, as a test makes its Python venv: one installation at a time, the package lists
+/// fetched first if the machine has none (a fresh one). Panics, naming both, if it cannot.
+pub fn debian(program: &str, probe: &str, package: &str) {
+    static APT: Mutex<()> = Mutex::new(());
+    let _apt = APT.lock().unwrap_or_else(|e| e.into_inner());
+    if Command::new(program).arg(probe).output().is_ok() {
+        return;
+    }
+    let install = || Command::new("apt-get").args(["install", "-y", "-q", package]).output();
+    let mut got = install();
+    if !got.as_ref().is_ok_and(|o| o.status.success()) {
+        let _ = Command::new("apt-get").args(["update", "-q"]).output();
+        got = install();
+    }
+    assert!(
+        got.as_ref().is_ok_and(|o| o.status.success()) && Command::new(program).arg(probe).output().is_ok(),
+        "this test needs {program} (Debian's {package}), and apt-get could not install it: {got:?}"
+    );
+}

@@ -589,3 +589,174 @@ fn the_command_line_clients_list_watch_and_steer_a_run() {
     assert_eq!(summary(&dir)["status"], "stopped");
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// The page's material in a screenshot of the viewer: the pixels of the grains' sand and the
+/// points' blue (within a margin of anti-aliasing), as (x, y).
+fn material_pixels(png: &std::path::Path) -> Vec<(u32, u32)> {
+    let img = image::open(png).unwrap_or_else(|e| panic!("{}: {e}", png.display())).to_rgb8();
+    let near = |p: &image::Rgb<u8>, c: [i32; 3]| (0..3).map(|k| (p[k] as i32 - c[k]).pow(2)).sum::<i32>() < 30 * 30;
+    img.enumerate_pixels()
+        .filter(|(_, _, p)| near(p, [194, 138, 64]) || near(p, [70, 130, 200]))
+        .map(|(x, y, _)| (x, y))
+        .collect()
+}
+
+/// The viewer's URL, as the bridge logs it.
+fn viewer_url(stderr: &str) -> String {
+    stderr
+        .lines()
+        .find_map(|l| l.split_once("the live viewer of run ").and_then(|(_, r)| r.split_once(": ")))
+        .map(|(_, u)| u.trim().to_string())
+        .expect("the viewer's URL")
+}
+
+/// `tests/python/viewer_check.py` on the page at `url` once it shows step `step`; its report.
+/// With no `step`, once it shows any.
+fn viewer_check(url: &str, step: Option<u64>, shot: &std::path::Path, click: &[&str]) -> serde_json::Value {
+    let step = step.map_or("any".to_string(), |s| s.to_string());
+    let mut args = vec![url.to_string(), step.clone(), shot.display().to_string()];
+    args.extend(click.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = client("viewer_check.py", &args).output().expect("python");
+    let said = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "the viewer did not show step {step}: {said}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&said).unwrap_or_else(|e| panic!("{e}: {said}"))
+}
+
+/// Issue 24: the live viewer in headless Chromium, on a collapsing hybrid column
+/// (`scenes/quickstart_hybrid_2d.toml`: a 40 mm column at the left end of a 0.2 m floor of
+/// glued beads). Paused early, the page shows the run's step and draws material above the
+/// floor only in the column's part of the picture; paused again after the collapse, there is
+/// material above the floor well to the right of it. A steerer's pause on the page is
+/// acknowledged; then, with access control and the page logged in as a reader, its pause
+/// gets no answer and the run goes on: the bridge refuses it, the page hides nothing.
+#[test]
+fn the_live_viewer_draws_the_run_and_steers_only_as_its_user_may() {
+    grains_system_tests::python();
+    debian("chromium", "--version", "chromium");
+    let _machine = machine();
+    let out = out_dir("bridge-viewer");
+    let connect = free_endpoint();
+    let ep = endpoint(&connect, None);
+    let mut launcher = Running::grains(&[
+        "run",
+        "scenes/quickstart_hybrid_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--bridge",
+        "--bridge-listen",
+        &connect,
+        "--steering",
+        "--view",
+        "--set",
+        NO_FRAMES,
+    ]);
+    let err = launcher.wait_for("the live viewer of run", Duration::from_secs(60));
+    let run = run_id(&err);
+    let url = viewer_url(&err);
+    wait_reachable(&ep, &run, &launcher);
+    let pause = |ep: &Endpoint| {
+        steer(ep, &run, br#"{"command":"pause"}"#).expect("an answer").expect("pause")["step"]
+            .as_u64()
+            .unwrap()
+    };
+    let resume = |ep: &Endpoint| steer(ep, &run, br#"{"command":"resume"}"#).expect("an answer").expect("resume");
+    let early = pause(&ep);
+    let shot1 = out.join("early.png");
+    let seen = viewer_check(&url, Some(early), &shot1, &[]);
+    assert!(
+        seen["summary_at_shot"].as_str().unwrap().contains(&format!("step {early} /")),
+        "{seen}"
+    );
+    // The material's box in the picture; "above the floor": over its lowest 8% (the floor
+    // row is 1.3 of the box's 41.5 mm); the column is the left 20% of the floor's width.
+    let boxed = |px: &[(u32, u32)]| {
+        let (x0, x1) = (px.iter().map(|p| p.0).min().unwrap(), px.iter().map(|p| p.0).max().unwrap());
+        let (y0, y1) = (px.iter().map(|p| p.1).min().unwrap(), px.iter().map(|p| p.1).max().unwrap());
+        let (w, h) = ((x1 - x0) as f64, (y1 - y0) as f64);
+        px.iter()
+            .filter(|p| (p.1 as f64) < y1 as f64 - 0.08 * h)
+            .map(|p| (p.0 - x0) as f64 / w)
+            .collect::<Vec<f64>>()
+    };
+    let px1 = material_pixels(&shot1);
+    assert!(px1.len() > 5_000, "{} material pixels in {}", px1.len(), shot1.display());
+    let above1 = boxed(&px1);
+    assert!(
+        above1.len() > 2_000 && above1.iter().all(|&x| x < 0.3),
+        "early: material above the floor must lie in the column's left 20%: {} pixels, rightmost at {:.2} of the width ({})",
+        above1.len(),
+        above1.iter().cloned().fold(0.0, f64::max),
+        shot1.display()
+    );
+    let resumed = resume(&ep);
+    assert_eq!(resumed["command"], "resume", "{resumed}");
+    wait_until(&launcher, "the column to collapse", Duration::from_secs(120), || {
+        runs(&ep, Duration::from_secs(1))
+            .ok()
+            .and_then(|l| l.into_iter().find(|(id, _)| *id == run))
+            .and_then(|(_, v)| v.and_then(|v| v["step"].as_u64()))
+            .is_some_and(|s| s > 30_000)
+    });
+    let late = pause(&ep);
+    // The steerer's page resumes the run: acknowledged.
+    let shot2 = out.join("late.png");
+    let seen = viewer_check(&url, Some(late), &shot2, &["click", "btn-resume", "\"command\":\"resume\""]);
+    assert!(
+        seen["summary_at_shot"].as_str().unwrap().contains(&format!("step {late} /")),
+        "{seen}"
+    );
+    let above2 = boxed(&material_pixels(&shot2));
+    let spread = above2.iter().filter(|&&x| (0.3..0.6).contains(&x)).count();
+    assert!(
+        spread > 500,
+        "late: the collapsed column must lie above the floor between 30% and 60% of the width: {spread} pixels ({})",
+        shot2.display()
+    );
+    steer(&ep, &run, br#"{"command":"stop"}"#).expect("an answer").expect("stop");
+    assert!(launcher.wait_exit(Duration::from_secs(60)).success(), "{}", launcher.stderr());
+
+    // A reader's page.
+    std::fs::write(out.join("users.txt"), "viewer:look\npilot:fly\n").unwrap();
+    let settings = out.join("bridge.toml");
+    let connect = free_endpoint();
+    std::fs::write(
+        &settings,
+        format!(
+            "listen = [{connect:?}]\nsteering = true\n[auth]\nusers_file = \"users.txt\"\nreaders = [\"viewer\"]\nsteerers = [\"pilot\"]\n[view]\nuser = \"viewer\"\n"
+        ),
+    )
+    .unwrap();
+    let mut launcher = Running::grains(&[
+        "run",
+        "scenes/quickstart_hybrid_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--bridge",
+        "--bridge-config",
+        settings.to_str().unwrap(),
+        "--set",
+        NO_FRAMES,
+    ]);
+    let err = launcher.wait_for("the live viewer of run", Duration::from_secs(60));
+    let run = run_id(&err);
+    let url = viewer_url(&err);
+    let pilot = endpoint(&connect, Some(("pilot", "fly")));
+    wait_reachable(&pilot, &run, &launcher);
+    let seen = viewer_check(&url, None, &out.join("reader.png"), &["click", "btn-pause", "no answer"]);
+    assert!(!seen["acks"].as_str().unwrap().contains("\"command\":\"pause\""), "{seen}");
+    // The run went on: its summaries are not paused and its step rises.
+    let s1 = wait_reachable(&pilot, &run, &launcher);
+    std::thread::sleep(Duration::from_millis(500));
+    let s2 = wait_reachable(&pilot, &run, &launcher);
+    assert!(s2 > s1, "the run stopped stepping after the reader's pause: {s1} then {s2}");
+    steer(&pilot, &run, br#"{"command":"stop"}"#).expect("an answer").expect("stop");
+    assert!(launcher.wait_exit(Duration::from_secs(60)).success(), "{}", launcher.stderr());
+    std::fs::remove_dir_all(&out).unwrap();
+}

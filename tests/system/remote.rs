@@ -18,15 +18,7 @@ struct Namespace {
 
 impl Namespace {
     fn new() -> Namespace {
-        // iproute2 is Debian's `ip`; on a machine without it the test installs it, as the
-        // harness makes its Python venv.
-        if Command::new("ip").arg("-V").output().is_err() {
-            let got = Command::new("apt-get").args(["install", "-y", "-q", "iproute2"]).output();
-            assert!(
-                got.as_ref().is_ok_and(|o| o.status.success()),
-                "this test needs iproute2 (`ip`), and apt-get could not install it: {got:?}"
-            );
-        }
+        grains_system_tests::debian("ip", "-V", "iproute2");
         let id = std::process::id() % 100_000;
         let (name, host, peer) = (format!("grains-{id}"), format!("gv{id}h"), format!("gv{id}r"));
         let net = format!("10.231.{}", id % 250);

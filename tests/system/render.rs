@@ -5,20 +5,9 @@ use grains_system_tests::*;
 use std::process::Command;
 use std::time::Duration;
 
-/// ffmpeg from Debian, installed if missing (as the remote test installs iproute2).
-fn ffmpeg() {
-    if Command::new("ffmpeg").arg("-version").output().is_err() {
-        let got = Command::new("apt-get").args(["install", "-y", "-q", "ffmpeg"]).output();
-        assert!(
-            got.as_ref().is_ok_and(|o| o.status.success()),
-            "this test needs ffmpeg, and apt-get could not install it: {got:?}"
-        );
-    }
-}
-
 #[test]
 fn render_every_other_frame_of_a_hybrid_run_draws_them_and_films_them() {
-    ffmpeg();
+    debian("ffmpeg", "-version", "ffmpeg");
     let _machine = machine();
     let out = out_dir("render-every");
     let mut run = Running::grains(&[

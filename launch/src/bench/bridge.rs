@@ -1,7 +1,8 @@
 //! `grains bench bridge`: what remote access costs a run. The same scene runs without a
-//! bridge, with a bridge and no client, and with a bridge and a client that subscribes to the
+//! bridge, with a bridge and no client, with a bridge and a client that subscribes to the
 //! views and never reads them (`grains_bridge::client::stalled_viewer`, a child process
-//! stopped with SIGSTOP once its buffers are full), alternating, fastest of the repeats each
+//! stopped with SIGSTOP once its buffers are full), and with the live viewer's page open in
+//! headless chromium (Debian's `chromium`; it draws every view), alternating, fastest of the repeats each
 //! (the machine is shared: the fastest run is the least disturbed). Figures: wall time of the
 //! stepping (release to last row) and of the whole run (start to end, so a bridge that holds up
 //! the run's start or end shows), and their ratios to the run without a bridge.
@@ -32,7 +33,12 @@ pub struct BridgeArgs {
 }
 
 /// The kinds of run, in the order they alternate.
-const KINDS: [&str; 3] = ["no bridge", "bridge, no client", "bridge, a client that never reads"];
+const KINDS: [&str; 4] = [
+    "no bridge",
+    "bridge, no client",
+    "bridge, a client that never reads",
+    "bridge, the viewer page in headless chromium",
+];
 
 /// A loopback endpoint on a port that was free a moment ago.
 fn free_endpoint() -> anyhow::Result<String> {
@@ -70,15 +76,45 @@ fn stalled_client(connect: &str) -> anyhow::Result<(std::process::Child, std::th
     Ok((child, stopper))
 }
 
+/// Opens the viewer page at `http` in headless chromium once the bridge serves it; the
+/// browser runs until killed.
+fn viewer_page(http: std::net::SocketAddr) -> anyhow::Result<std::process::Child> {
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while std::net::TcpStream::connect(http).is_err() {
+        if std::time::Instant::now() > deadline {
+            bail!("the viewer page at {http} did not open in 60 s");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::process::Command::new("chromium")
+        .args([
+            "--headless=new",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--remote-debugging-port=0",
+            "--window-size=1280,720",
+        ])
+        .arg(format!("http://{http}/"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .context("starting chromium (Debian's chromium) for the viewer")
+}
+
 fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
     let connect = free_endpoint()?;
+    let http = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?;
     let bridge = (kind > 0).then(|| grains_bridge::config::BridgeArgs {
-        config: None,
         listen: vec![connect.clone()],
-        steering: false,
-        rate: None,
+        view_listen: (kind == 3).then(|| http.to_string()),
+        ..Default::default()
     });
     let client = if kind == 2 { Some(stalled_client(&connect)?) } else { None };
+    let browser = if kind == 3 {
+        Some(std::thread::spawn(move || viewer_page(http)))
+    } else {
+        None
+    };
     let mut overrides = vec![format!("run.duration={}", args.duration), "output.frames_every=0".to_string()];
     overrides.extend(args.overrides.iter().cloned());
     let started = std::time::Instant::now();
@@ -95,6 +131,11 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
         announce: false,
     });
     let whole = started.elapsed().as_secs_f64();
+    if let Some(b) = browser {
+        let mut chromium = b.join().expect("the browser thread")?;
+        let _ = chromium.kill();
+        let _ = chromium.wait();
+    }
     if let Some((mut child, stopper)) = client {
         let _ = child.kill();
         let _ = child.wait();
@@ -110,7 +151,7 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
 
 pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
-    let mut best = [(f64::INFINITY, f64::INFINITY); 3];
+    let mut best = [(f64::INFINITY, f64::INFINITY); KINDS.len()];
     for r in 0..args.repeats {
         for (k, b) in best.iter_mut().enumerate() {
             tracing::info!("bench bridge: repeat {}/{}, {} ...", r + 1, args.repeats, KINDS[k]);

@@ -55,6 +55,36 @@ pub struct BridgeConfig {
     /// if steering is on).
     #[serde(default)]
     pub auth: Option<Auth>,
+    /// The live viewer (a web page served by the bridge); off without this table.
+    #[serde(default)]
+    pub view: Option<View>,
+}
+
+/// The live viewer's settings.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct View {
+    /// Address of the page's HTTP server, `IP:PORT` (port 0: a free one); its WebSocket
+    /// listens on a free port of the same IP.
+    #[serde(default = "default_view_listen")]
+    pub listen: String,
+    /// With `[auth]`: the user the page reads (and steers) as; its password is read from
+    /// `auth.users_file`.
+    #[serde(default)]
+    pub user: Option<String>,
+}
+
+fn default_view_listen() -> String {
+    "127.0.0.1:0".to_string()
+}
+
+impl Default for View {
+    fn default() -> Self {
+        View {
+            listen: default_view_listen(),
+            user: None,
+        }
+    }
 }
 
 /// zenoh user/password authentication plus an access-control list built from it.
@@ -86,6 +116,7 @@ impl Default for BridgeConfig {
             steering: false,
             rate: default_rate(),
             auth: None,
+            view: None,
         }
     }
 }
@@ -123,6 +154,19 @@ impl BridgeConfig {
         }
         if !(self.rate.is_finite() && self.rate >= 0.0) {
             bail!("bridge: rate: {} is not a rate; summaries per second, 0 for every step", self.rate);
+        }
+        if let Some(v) = &self.view {
+            if v.listen.parse::<std::net::SocketAddr>().is_err() {
+                bail!("bridge: view.listen: {:?} is not IP:PORT (e.g. \"127.0.0.1:8080\")", v.listen);
+            }
+            match (&self.auth, &v.user) {
+                (Some(_), None) => bail!("bridge: view: with [auth], view.user says as whom the page reads (a reader or a steerer)"),
+                (Some(a), Some(u)) if !a.readers.contains(u) && !a.steerers.contains(u) => {
+                    bail!("bridge: view.user {u:?} is neither in auth.readers nor in auth.steerers")
+                }
+                (None, Some(u)) => bail!("bridge: view.user {u:?}: there is no [auth] to log in to"),
+                _ => {}
+            }
         }
         if let Some(a) = &self.auth {
             if !a.users_file.is_file() {
@@ -207,6 +251,7 @@ impl BridgeConfig {
             "listen": self.listen,
             "steering": self.steering,
             "rate": self.rate,
+            "view": self.view.as_ref().map(|v| serde_json::json!({ "listen": v.listen, "user": v.user })),
             "auth": self.auth.as_ref().map(|a| serde_json::json!({
                 "users_file": a.users_file.display().to_string(),
                 "readers": a.readers,
@@ -255,6 +300,12 @@ pub struct BridgeArgs {
     /// Summaries per second at most, 0 for every macro-step [default: 10].
     #[arg(long = "bridge-rate", value_name = "HZ")]
     pub rate: Option<f64>,
+    /// Serve the live viewer (a web page; the bridge logs its URL).
+    #[arg(long)]
+    pub view: bool,
+    /// The viewer page's address, IP:PORT [default: 127.0.0.1 on a free port]; implies --view.
+    #[arg(long = "view-listen", value_name = "ADDR")]
+    pub view_listen: Option<String>,
 }
 
 impl BridgeArgs {
@@ -267,6 +318,12 @@ impl BridgeArgs {
             c.listen = self.listen.clone();
         }
         c.steering |= self.steering;
+        if self.view || self.view_listen.is_some() {
+            let v = c.view.get_or_insert_with(View::default);
+            if let Some(l) = &self.view_listen {
+                v.listen = l.clone();
+            }
+        }
         if let Some(rate) = self.rate {
             c.rate = rate;
         }
@@ -288,6 +345,12 @@ impl BridgeArgs {
         }
         if let Some(r) = self.rate {
             out.extend(["--bridge-rate".to_string(), r.to_string()]);
+        }
+        if self.view {
+            out.push("--view".into());
+        }
+        if let Some(l) = &self.view_listen {
+            out.extend(["--view-listen".to_string(), l.clone()]);
         }
         out
     }

@@ -18,6 +18,7 @@ pub mod client;
 pub mod command;
 pub mod config;
 pub mod state;
+pub mod view;
 
 use anyhow::Context;
 use config::{BridgeConfig, keys};
@@ -70,6 +71,14 @@ pub fn serve<T: Transport>(
     let session = zenoh::open(cfg.zenoh(run)?)
         .wait()
         .map_err(|e| anyhow::anyhow!("grains-bridge: cannot open zenoh on {:?}: {e}", cfg.listen))?;
+    let _viewer = match &cfg.view {
+        Some(v) => {
+            let viewer = view::start(cfg, v, run)?;
+            tracing::info!("the live viewer of run {run}: {}", viewer.url);
+            Some(viewer)
+        }
+        None => None,
+    };
     let (tx, rx) = mpsc::channel();
     let _state_q = queryable(&session, keys::state_all(run), tx.clone(), Incoming::State)?;
     let _control_q = queryable(&session, keys::control(run), tx, Incoming::Control)?;
