@@ -1223,7 +1223,7 @@ fn a_packing_from_grains_pack_is_reused_by_a_scene() {
 /// report lists every check with its reference, value, tolerance and result, among them the
 /// hybrid column runout within 10% of the DEM's (issue 5), the hybrid silo discharge within
 /// 15% (issue 6) and the DEM restitution against the analytic e; every chart it names is
-/// there as PNG, SVG and CSV.
+/// there as PNG, SVG and CSV, and the pictures of the column and silo runs as PNG.
 #[test]
 fn validate_quick_passes_in_under_15_minutes_with_charts_and_data() {
     let _machine = machine();
@@ -1246,10 +1246,19 @@ fn validate_quick_passes_in_under_15_minutes_with_charts_and_data() {
             .unwrap_or_else(|| panic!("no check {check}: {report}"));
         assert!(row.ends_with("| pass |"), "{row}");
     }
-    let charts: Vec<&str> = report
+    // Charts come with their SVG and data; pictures of the runs are PNGs only.
+    let images: Vec<&str> = report
         .lines()
         .filter_map(|l| l.strip_prefix("![")?.split("](").nth(1)?.strip_suffix(".png)"))
         .collect();
+    let (charts, pictures): (Vec<&str>, Vec<&str>) = images.into_iter().partition(|stem| report.contains(&format!("([SVG]({stem}.svg)")));
+    for stem in ["column_pictures", "silo_pictures"] {
+        assert!(pictures.contains(&stem), "picture {stem} not in the report: {pictures:?}");
+    }
+    for stem in &pictures {
+        let png = std::fs::read(out.join(format!("{stem}.png"))).unwrap_or_default();
+        assert!(png.starts_with(b"\x89PNG"), "{stem}.png");
+    }
     for stem in [
         "column_profile_0",
         "silo_discharge",
