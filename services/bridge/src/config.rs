@@ -355,3 +355,58 @@ impl BridgeArgs {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Settings from TOML text with a users file beside them.
+    fn settings(text: &str) -> anyhow::Result<BridgeConfig> {
+        let dir = std::env::temp_dir().join(format!("grains-bridge-cfg-{}-{}", std::process::id(), text.len()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("users.txt"), "viewer:look\npilot:fly\n").unwrap();
+        std::fs::write(dir.join("bridge.toml"), text).unwrap();
+        let c = BridgeConfig::load(&dir.join("bridge.toml"));
+        std::fs::remove_dir_all(&dir).unwrap();
+        c
+    }
+
+    const AUTH: &str = "[auth]\nusers_file = \"users.txt\"\nreaders = [\"viewer\"]\nsteerers = [\"pilot\"]\n";
+
+    #[test]
+    fn the_viewer_settings_say_as_whom_the_page_acts() {
+        let c = settings(&format!("{AUTH}[view]\nuser = \"viewer\"\n")).unwrap();
+        assert_eq!(
+            c.view,
+            Some(View {
+                listen: "127.0.0.1:0".into(),
+                user: Some("viewer".into())
+            })
+        );
+        for (text, says) in [
+            (format!("{AUTH}[view]\n"), "view.user says as whom"),
+            (
+                format!("{AUTH}[view]\nuser = \"ghost\"\n"),
+                "neither in auth.readers nor in auth.steerers",
+            ),
+            ("[view]\nuser = \"viewer\"\n".to_string(), "there is no [auth]"),
+            ("[view]\nlisten = \"localhost\"\n".to_string(), "is not IP:PORT"),
+        ] {
+            let e = settings(&text).unwrap_err().to_string();
+            assert!(e.contains(says), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn view_flags_turn_the_viewer_on_and_pass_to_the_bridge_process() {
+        let args = BridgeArgs {
+            view_listen: Some("127.0.0.1:8080".into()),
+            ..Default::default()
+        };
+        assert_eq!(args.resolve().unwrap().view.unwrap().listen, "127.0.0.1:8080");
+        assert_eq!(args.to_args(), ["--view-listen", "127.0.0.1:8080"]);
+        let off = BridgeArgs::default();
+        assert_eq!(off.resolve().unwrap().view, None);
+        assert!(off.to_args().is_empty());
+    }
+}

@@ -118,3 +118,59 @@ fn answer(mut stream: TcpStream, query: &str) -> anyhow::Result<()> {
     stream.write_all(body)?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Read;
+
+    /// What the page server answers to `GET <target>`: status line, headers and body.
+    fn get(target: &str) -> (String, String) {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let at = listener.local_addr().unwrap();
+        let server = std::thread::spawn(move || {
+            let (stream, _) = listener.accept().unwrap();
+            answer(stream, "?ws=ws://127.0.0.1:9&run=r1").unwrap();
+        });
+        let mut c = TcpStream::connect(at).unwrap();
+        write!(c, "GET {target} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        let mut reply = Vec::new();
+        c.read_to_end(&mut reply).unwrap();
+        server.join().unwrap();
+        let reply = String::from_utf8_lossy(&reply).into_owned();
+        let (head, body) = reply.split_once("\r\n\r\n").unwrap();
+        (head.to_string(), body.to_string())
+    }
+
+    #[test]
+    fn the_page_server_sends_the_page_its_script_and_nothing_else() {
+        let (head, _) = get("/");
+        assert!(
+            head.starts_with("HTTP/1.1 302") && head.contains("Location: /?ws=ws://127.0.0.1:9&run=r1"),
+            "{head}"
+        );
+        let (head, body) = get("/?ws=ws://127.0.0.1:9&run=r1");
+        assert!(head.starts_with("HTTP/1.1 200") && head.contains("text/html"), "{head}");
+        assert_eq!(body, PAGE);
+        let (head, body) = get("/dist/viewer.js");
+        assert!(head.starts_with("HTTP/1.1 200") && head.contains("text/javascript"), "{head}");
+        assert_eq!(body.len(), SCRIPT.len());
+        assert!(head.contains(&format!("Content-Length: {}", SCRIPT.len())), "{head}");
+        for other in ["/../Cargo.toml", "/src/viewer.js", "/favicon.ico"] {
+            assert!(get(other).0.starts_with("HTTP/1.1 404"), "{other}");
+        }
+    }
+
+    #[test]
+    fn a_password_is_read_from_the_users_file() {
+        let dir = std::env::temp_dir().join(format!("grains-view-users-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("users.txt");
+        std::fs::write(&file, "viewer:look\npilot: fly \n").unwrap();
+        assert_eq!(password(&file, "viewer").unwrap(), "look");
+        assert_eq!(password(&file, "pilot").unwrap(), "fly");
+        let missing = password(&file, "ghost").unwrap_err().to_string();
+        assert!(missing.contains("\"ghost\" is not in"), "{missing}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
