@@ -57,6 +57,8 @@ fn run_drum(args: &ValidateArgs, packing: &Path, dem: bool, point_half: f64) -> 
     let mut overrides = vec![format!("body.0.packing={:?}", packing.display().to_string())];
     if dem {
         overrides.push("body.0.model=\"dem\"".into());
+    } else {
+        overrides.extend(args.hybrid_overrides.iter().cloned());
     }
     let outcome = run_scene(args, &path, overrides)?;
     if outcome.status != Status::Completed {
@@ -108,8 +110,13 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<crate::report::Part> {
         md,
         "Scene `{SCENE}` from one poured packing, {} s at 2 rad/s; the free surface's angle (line through the \
          tops of the material in 2-mm columns over the middle half of the drum) averaged over the frames after {STEADY} s. \
-         Reference: the pure DEM run (issue 6: hybrid within {ANGLE_TOLERANCE}°).\n",
-        scene.steps as f64 * scene.dt
+         Reference: the pure DEM run (issue 6: hybrid within {ANGLE_TOLERANCE}°).{}\n",
+        scene.steps as f64 * scene.dt,
+        if args.hybrid_overrides.is_empty() {
+            String::new()
+        } else {
+            format!(" The hybrid run with overrides `{}`.", args.hybrid_overrides.join(" "))
+        }
     )?;
     writeln!(md, "| model | angle [°] | frames | mean DEM grains | wall [s] | speedup vs DEM |")?;
     writeln!(md, "|---|---|---|---|---|---|")?;
