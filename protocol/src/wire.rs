@@ -436,15 +436,18 @@ impl Param {
 
 wire_type! {
     /// One grain or material point of a view for remote viewers (DEM or MPM → bridge on
-    /// [`crate::names::DEM_VIEW`] / [`crate::names::MPM_VIEW`]). 64 bytes. The header's
+    /// [`crate::names::DEM_VIEW`] / [`crate::names::MPM_VIEW`]). 72 bytes. The header's
     /// `flags` holds the solver's total count (the view is every k-th item).
-    "grains.ViewPoint.v1",
+    "grains.ViewPoint.v2",
     pub struct ViewPoint {
         pub id: u64,
         pub position: [f64; 3],
         pub velocity: [f64; 3],
         /// Radius of a grain; half the spacing of a material point [m].
         pub size: f64,
+        /// Pressure −tr σ / d of a material point [Pa], positive in compression; NaN where
+        /// the solver does not say (the DEM's grains).
+        pub pressure: f64,
     }
 }
 

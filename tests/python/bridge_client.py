@@ -13,6 +13,7 @@ when the package is not installed.
 import json
 import sys
 import time
+import numpy as np
 
 try:
     from grains_client import Client, Refused
@@ -53,6 +54,9 @@ def main():
             fail(f"view of {len(view.ids)} of {view.total} grains, positions {view.positions.shape}; the run has {n}")
         if not (view.sizes > 0).all() or not (view.speeds() >= 0).all():
             fail("a view size is not positive")
+        # Grains carry no pressure in a view (the DEM does not say): NaN, not a made-up 0.
+        if not (view.pressures.shape == (n,) and np.isnan(view.pressures).all()):
+            fail(f"the grains' view pressures should all be NaN: {view.pressures[:5]}")
         print(f"view: {len(view.ids)} grains at step {view.step}, fastest {view.speeds().max():.3e} m/s")
 
         # A refusal is an exception, with the reason, and changes nothing.

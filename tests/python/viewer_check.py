@@ -77,6 +77,8 @@ REPORT = """({
            .filter(([k, v]) => v).map(([k, v]) => [k, v.step])) : {},
   acks: document.getElementById('acks').textContent,
   fps: document.getElementById('fps').textContent,
+  pressure: window.grainsViewer ? Object.fromEntries(Object.entries(window.grainsViewer.lastViews || {})
+           .filter(([k, v]) => v).map(([k, v]) => [k, v.pressure])) : {},
 })"""
 
 at_shot = None

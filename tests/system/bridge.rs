@@ -711,6 +711,22 @@ fn the_live_viewer_draws_the_run_and_steers_only_as_its_user_may() {
         seen["summary_at_shot"].as_str().unwrap().contains(&format!("step {late} /")),
         "{seen}"
     );
+    // Pressure: the points' (material under gravity: compressed on the whole), not the
+    // grains' (the DEM does not say: null).
+    let pressures = |role: &str| {
+        seen["pressure"][role]
+            .as_array()
+            .unwrap_or_else(|| panic!("no {role} view"))
+            .clone()
+    };
+    let points: Vec<f64> = pressures("mpm").iter().map(|p| p.as_f64().expect("a point's pressure")).collect();
+    let mean = points.iter().sum::<f64>() / points.len() as f64;
+    assert!(
+        mean > 0.0,
+        "the points' mean pressure {mean} Pa; the first: {:?}",
+        &points[..points.len().min(10)]
+    );
+    assert!(pressures("dem").iter().all(|p| p.is_null()), "a grain with a pressure");
     let above2 = boxed(&material_pixels(&shot2));
     let spread = above2.iter().filter(|&&x| (0.3..0.6).contains(&x)).count();
     assert!(

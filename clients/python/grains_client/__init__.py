@@ -72,6 +72,8 @@ class View:
     velocities: np.ndarray
     #: (n,) radius of a grain, half the spacing of a point [m]
     sizes: np.ndarray
+    #: (n,) pressure of a point [Pa, positive in compression]; NaN for a grain
+    pressures: np.ndarray
 
     def speeds(self) -> np.ndarray:
         """|v| of every item [m/s]."""
@@ -154,6 +156,7 @@ class Client:
             positions=np.asarray(v["position"], dtype=float).reshape(-1, 3),
             velocities=np.asarray(v["velocity"], dtype=float).reshape(-1, 3),
             sizes=np.asarray(v["size"], dtype=float),
+            pressures=np.asarray([np.nan if p is None else p for p in v.get("pressure", [])], dtype=float),
         )
 
     # -- steering (the bridge must run with steering on, and the user be a steerer) ----

@@ -657,6 +657,7 @@ class Mpm:
             out["velocity"] = 0.0
             out["velocity"][:, :dim] = sol.v[pick]
             out["size"] = size
+            out["pressure"] = np.nan  # this example does not say (§3.8a allows it)
             self.p.header(h, step, start + dt, dt)
             h.flags = n
 

@@ -163,11 +163,11 @@ class Ack(ctypes.Structure):
     ]
 
 
-@_named("grains.ViewPoint.v1")
+@_named("grains.ViewPoint.v2")
 class ViewPoint(ctypes.Structure):
-    """§3.8a: DEM or MPM -> bridge, one item of a decimated view (64 bytes)."""
+    """§3.8a: DEM or MPM -> bridge, one item of a decimated view (72 bytes)."""
 
-    _fields_ = [("id", u64), ("position", f64 * 3), ("velocity", f64 * 3), ("size", f64)]
+    _fields_ = [("id", u64), ("position", f64 * 3), ("velocity", f64 * 3), ("size", f64), ("pressure", f64)]
 
 
 @_named("grains.ZoneCell.v1")
@@ -181,11 +181,13 @@ class ZoneCell(ctypes.Structure):
 RASTER_NODE = np.dtype([("node", "<u8"), ("mass", "<f8"), ("momentum", "<f8", (3,))])
 NODE_VELOCITY = np.dtype([("node", "<u8"), ("velocity", "<f8", (3,))])
 ZONE_CELL = np.dtype([("cell", "<u8"), ("zone", "<u4"), ("_pad", "<u4"), ("distance", "<f8")])
-VIEW_POINT = np.dtype([("id", "<u8"), ("position", "<f8", (3,)), ("velocity", "<f8", (3,)), ("size", "<f8")])
+VIEW_POINT = np.dtype(
+    [("id", "<u8"), ("position", "<f8", (3,)), ("velocity", "<f8", (3,)), ("size", "<f8"), ("pressure", "<f8")]
+)
 assert RASTER_NODE.itemsize == ctypes.sizeof(RasterNode) == 40
 assert NODE_VELOCITY.itemsize == ctypes.sizeof(NodeVelocity) == 32
 assert ZONE_CELL.itemsize == ctypes.sizeof(ZoneCell) == 24
-assert VIEW_POINT.itemsize == ctypes.sizeof(ViewPoint) == 64
+assert VIEW_POINT.itemsize == ctypes.sizeof(ViewPoint) == 72
 assert ctypes.sizeof(StepHeader) == 80 and ctypes.sizeof(Summary) == 104
 assert ctypes.sizeof(Hello) == ctypes.sizeof(Welcome) == 64
 assert ctypes.sizeof(StepBegin) == 8 and ctypes.alignment(StepBegin) == 4

@@ -145,6 +145,8 @@ pub fn view_document(run: &str, role: Role, header: &StepHeader, points: &[ViewP
         "position": points.iter().map(|p| f32s(&p.position)).collect::<Vec<_>>(),
         "velocity": points.iter().map(|p| f32s(&p.velocity)).collect::<Vec<_>>(),
         "size": points.iter().map(|p| p.size as f32).collect::<Vec<_>>(),
+        // NaN (not said) is null.
+        "pressure": points.iter().map(|p| p.pressure.is_finite().then_some(p.pressure as f32)).collect::<Vec<_>>(),
     })
 }
 

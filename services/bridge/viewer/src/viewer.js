@@ -233,6 +233,13 @@ const HIGH = [255, 225, 40]; // yellow
 const ramp = (t) => `rgb(${LOW.map((a, k) => Math.round(a + (HIGH[k] - a) * t)).join(",")})`;
 const RAMP = Array.from({ length: SPEED_BINS }, (_, i) => ramp(i / (SPEED_BINS - 1)));
 const speed = (v) => Math.hypot(v[0], v[1], v[2] || 0);
+const NO_VALUE = "#6b7480"; // grey: an item the colour's quantity says nothing of (a grain's pressure)
+const UNITS = { speed: "m/s", pressure: "Pa" };
+/** The coloured quantity of item i of view v, or null. */
+const quantity = {
+  speed: (v, i) => (v.velocity && v.velocity[i] ? speed(v.velocity[i]) : null),
+  pressure: (v, i) => (v.pressure && Number.isFinite(v.pressure[i]) ? v.pressure[i] : null),
+};
 
 function draw() {
   drawScheduled = false;
@@ -255,8 +262,9 @@ function draw() {
   }
 
   // Fit the box (5% margin, at least 1 mm wide) below the legend, keeping the aspect ratio.
-  const bySpeed = $("colour").value === "speed";
-  const top = (views.length + (bySpeed ? 2 : 1)) * 16 * dpr + 8 * dpr;
+  const mode = $("colour").value; // "model" | "speed" | "pressure"
+  const ramped = mode in quantity;
+  const top = (views.length + (ramped ? 2 : 1)) * 16 * dpr + 8 * dpr;
   const bw = Math.max(bounds.x1 - bounds.x0, 1e-3);
   const bh = Math.max(bounds.y1 - bounds.y0, 1e-3);
   const scale = Math.max(1e-9, Math.min(w / (bw * 1.1), (h - top) / (bh * 1.1)));
@@ -269,23 +277,34 @@ function draw() {
   ctx.lineWidth = 1;
   ctx.strokeRect(X(bounds.x0), Y(bounds.y1), bw * scale, bh * scale);
 
-  let vmax = 0;
-  if (bySpeed) {
-    for (const v of views) for (const u of v.velocity || []) vmax = Math.max(vmax, speed(u));
+  // The ramp spans the values shown (speeds from 0).
+  let lo = mode === "speed" ? 0 : Infinity;
+  let hi = -Infinity;
+  if (ramped) {
+    for (const v of views) {
+      for (let i = 0; i < (v.position || []).length; i++) {
+        const q = quantity[mode](v, i);
+        if (q !== null) [lo, hi] = [Math.min(lo, q), Math.max(hi, q)];
+      }
+    }
   }
   for (const v of views) {
     const disk = v.role === "dem";
     const pos = v.position || [];
     const size = v.size || [];
-    const vel = v.velocity || [];
-    // One path per colour: a few fill calls for thousands of shapes.
-    const paths = bySpeed ? RAMP.map(() => new Path2D()) : [new Path2D()];
+    // One path per colour (the ramp's bins, then "no value"): a few fill calls for thousands
+    // of shapes.
+    const paths = ramped ? [...RAMP, NO_VALUE].map(() => new Path2D()) : [new Path2D()];
     for (let i = 0; i < pos.length; i++) {
       const px = X(pos[i][0]);
       const py = Y(pos[i][1]);
       const r = (size[i] || 0) * scale;
       let bin = 0;
-      if (bySpeed && vmax > 0 && vel[i]) bin = Math.min(SPEED_BINS - 1, Math.floor((speed(vel[i]) / vmax) * SPEED_BINS));
+      if (ramped) {
+        const q = quantity[mode](v, i);
+        if (q === null) bin = SPEED_BINS;
+        else if (hi > lo) bin = Math.min(SPEED_BINS - 1, Math.floor(((q - lo) / (hi - lo)) * SPEED_BINS));
+      }
       const p = paths[bin];
       if (disk) {
         const rr = Math.max(r, 0.75);
@@ -297,7 +316,7 @@ function draw() {
       }
     }
     paths.forEach((p, k) => {
-      ctx.fillStyle = bySpeed ? RAMP[k] : MODEL_COLOUR[v.role] || "#ccc";
+      ctx.fillStyle = ramped ? (k < SPEED_BINS ? RAMP[k] : NO_VALUE) : MODEL_COLOUR[v.role] || "#ccc";
       ctx.fill(p);
     });
   }
@@ -311,7 +330,7 @@ function draw() {
     ty += 16 * dpr;
   }
   ctx.fillText(`x ${fmt(bounds.x0, 3)} … ${fmt(bounds.x1, 3)} m, y ${fmt(bounds.y0, 3)} … ${fmt(bounds.y1, 3)} m`, 8 * dpr, ty);
-  if (bySpeed) {
+  if (ramped) {
     ty += 16 * dpr;
     const gw = 120 * dpr;
     const g = ctx.createLinearGradient(8 * dpr, 0, 8 * dpr + gw, 0);
@@ -320,7 +339,8 @@ function draw() {
     ctx.fillStyle = g;
     ctx.fillRect(8 * dpr, ty - 10 * dpr, gw, 10 * dpr);
     ctx.fillStyle = "#d8dee4";
-    ctx.fillText(`0 … ${fmt(vmax, 3)} m/s`, 16 * dpr + gw, ty);
+    const range = hi >= lo ? `${fmt(lo, 3)} … ${fmt(hi, 3)} ${UNITS[mode]}` : `no ${mode} in the views`;
+    ctx.fillText(mode === "pressure" ? `${range} (grains: grey)` : range, 16 * dpr + gw, ty);
   }
 
   viewer.drawn += 1;

@@ -220,6 +220,9 @@ impl<S: Space> Solver for DemSolver<S> {
                 position: S::to_array(g.x[i]),
                 velocity: S::to_array(g.v[i]),
                 size: g.radius[i],
+                // A grain's stress would need its contacts' forces summed (Love–Weber): not
+                // for a view.
+                pressure: f64::NAN,
             });
         }
         g.len() as u64

@@ -240,6 +240,7 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
                 position: S::to_array(p.x[k]),
                 velocity: S::to_array(p.v[k]),
                 size: 0.5 * p.volume[k].powf(1.0 / S::DIM as f64),
+                pressure: Model::pressure(&p.tau[k], p.jacobian[k]),
             });
         }
         p.len() as u64
