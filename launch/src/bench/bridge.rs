@@ -7,7 +7,7 @@
 //! stepping (release to last row) and of the whole run (start to end, so a bridge that holds up
 //! the run's start or end shows), and their ratios to the run without a bridge.
 
-use crate::run::{RunOptions, RunOutcome, Status, TransportKind, run};
+use crate::run::{RunOptions, RunOutcome, Status, run};
 use anyhow::{Context, bail};
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
@@ -120,15 +120,7 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
     let started = std::time::Instant::now();
     let outcome: anyhow::Result<RunOutcome> = run(&RunOptions {
         bridge,
-        resume: None,
-        zenoh_listen: None,
-        scene_path: args.scene.clone(),
-        transport: TransportKind::Ipc,
-        external: Vec::new(),
-        out_root: args.out.join("runs"),
-        progress: false,
-        overrides,
-        announce: false,
+        ..RunOptions::quiet(args.scene.clone(), args.out.join("runs"), overrides)
     });
     let whole = started.elapsed().as_secs_f64();
     if let Some(b) = browser {

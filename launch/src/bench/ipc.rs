@@ -81,16 +81,8 @@ fn measure(args: &IpcArgs, nodes: u64, steps: u64, warmup: u64, zenoh: bool) -> 
                 continue;
             }
             let opts = RunOptions {
-                bridge: None,
-                resume: None,
-                zenoh_listen: None,
-                scene_path: scene.clone(),
                 transport,
-                external: vec![],
-                out_root: args.out.join("runs"),
-                progress: false,
-                overrides: vec![],
-                announce: false,
+                ..RunOptions::quiet(scene.clone(), args.out.join("runs"), Vec::new())
             };
             let outcome = run(&opts)?;
             if outcome.status != Status::Completed {

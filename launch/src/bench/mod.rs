@@ -23,7 +23,7 @@ pub(crate) fn run_resolved(
     out: &std::path::Path,
     frame: bool,
 ) -> anyhow::Result<(std::path::PathBuf, grains_protocol::scene::Scene)> {
-    use crate::run::{RunOptions, Status, TransportKind, run};
+    use crate::run::{RunOptions, Status, run};
     let (s, text, _) = crate::run::steps::load(scene, overrides)?;
     let resolved = std::path::absolute(
         out.join("scenes")
@@ -32,18 +32,8 @@ pub(crate) fn run_resolved(
     std::fs::create_dir_all(resolved.parent().expect("a file in a directory"))?;
     std::fs::write(&resolved, &text)?;
     tracing::info!("bench: {label}");
-    let outcome = run(&RunOptions {
-        bridge: None,
-        resume: None,
-        zenoh_listen: None,
-        scene_path: resolved,
-        transport: TransportKind::Ipc,
-        external: Vec::new(),
-        out_root: out.join("runs"),
-        progress: false,
-        overrides: vec![format!("output.frames_every={}", if frame { s.steps } else { 0 })],
-        announce: false,
-    })?;
+    let frames = format!("output.frames_every={}", if frame { s.steps } else { 0 });
+    let outcome = run(&RunOptions::quiet(resolved, out.join("runs"), vec![frames]))?;
     if outcome.status != Status::Completed {
         anyhow::bail!("{label}: the run did not complete: {}", outcome.message);
     }

@@ -65,6 +65,25 @@ pub struct RunOptions {
     pub resume: Option<PathBuf>,
 }
 
+impl RunOptions {
+    /// A run started from code (validate, benches): iceoryx2 processes, no bridge, nothing
+    /// said on stderr.
+    pub fn quiet(scene_path: PathBuf, out_root: PathBuf, overrides: Vec<String>) -> Self {
+        RunOptions {
+            scene_path,
+            transport: TransportKind::Ipc,
+            external: Vec::new(),
+            out_root,
+            progress: false,
+            overrides,
+            announce: false,
+            bridge: None,
+            zenoh_listen: None,
+            resume: None,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Status {
     Completed,

@@ -6,7 +6,7 @@ use super::args::ValidateArgs;
 use crate::metrics::MetricsTable;
 use crate::report::Part;
 use crate::report::chart::{Chart, Kind, Series};
-use crate::run::{RunOptions, RunOutcome, Status, TransportKind, run};
+use crate::run::{RunOptions, RunOutcome, Status, run};
 use anyhow::bail;
 use grains_protocol::Role;
 use std::path::{Path, PathBuf};
@@ -18,18 +18,7 @@ pub fn load_with(path: &Path, overrides: &[String]) -> anyhow::Result<grains_pro
 
 /// One run of `scene` with `overrides` as processes, quietly, under `<out>/runs`.
 pub fn run_scene(args: &ValidateArgs, scene: &Path, overrides: Vec<String>) -> anyhow::Result<RunOutcome> {
-    run(&RunOptions {
-        bridge: None,
-        resume: None,
-        zenoh_listen: None,
-        scene_path: scene.to_path_buf(),
-        transport: TransportKind::Ipc,
-        external: Vec::new(),
-        out_root: args.out.join("runs"),
-        progress: false,
-        overrides,
-        announce: false,
-    })
+    run(&RunOptions::quiet(scene.to_path_buf(), args.out.join("runs"), overrides))
 }
 
 /// A completed run: its directory, first-row counts and wall time.
