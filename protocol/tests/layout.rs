@@ -36,7 +36,7 @@ fn wire_layouts_match_the_spec() {
         n_nodes @ 32, mass @ 40, momentum @ 48, kinetic_energy @ 72, checksum @ 80,
         compute_ns @ 88, wait_ns @ 96);
     check_layout!(Control, size 24, seq @ 0, command @ 8, key @ 12, value @ 16);
-    check_layout!(ViewPoint, size 64, id @ 0, position @ 8, velocity @ 32, size @ 56);
+    check_layout!(ViewPoint, size 72, id @ 0, position @ 8, velocity @ 32, size @ 56, pressure @ 64);
     check_layout!(Ack, size 32, seq @ 0, step @ 8, command @ 16, status @ 20, key @ 24, _pad @ 28);
 }
 
