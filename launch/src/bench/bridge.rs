@@ -5,7 +5,9 @@
 //! headless chromium (Debian's `chromium`; it draws every view), alternating, fastest of the repeats each
 //! (the machine is shared: the fastest run is the least disturbed). Figures: wall time of the
 //! stepping (release to last row) and of the whole run (start to end, so a bridge that holds up
-//! the run's start or end shows), and their ratios to the run without a bridge.
+//! the run's start or end shows), and their ratios to the run without a bridge; and the
+//! bridge's own CPU time (from `/proc`), which is what a run pays for a viewer whose browser
+//! runs on another machine.
 
 use crate::run::{RunOptions, RunOutcome, Status, run};
 use anyhow::{Context, bail};
@@ -101,7 +103,38 @@ fn viewer_page(http: std::net::SocketAddr) -> anyhow::Result<std::process::Child
         .context("starting chromium (Debian's chromium) for the viewer")
 }
 
-fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
+/// CPU seconds (user + system) of our child process named `name`, if there is one now.
+fn child_cpu(name: &str) -> Option<f64> {
+    let me = std::process::id().to_string();
+    // SAFETY: sysconf has no preconditions.
+    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
+    std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
+        let stat = std::fs::read_to_string(e.path().join("stat")).ok()?;
+        // pid (comm) state ppid ... utime stime: fields 14 and 15; comm may hold spaces.
+        let (comm, rest) = stat.split_once(" (")?.1.rsplit_once(") ")?;
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        if comm != name || f.get(1) != Some(&me.as_str()) {
+            return None;
+        }
+        Some((f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / tick)
+    })
+}
+
+/// Samples the bridge's CPU time every 100 ms until `done`; the last sample (the bridge's
+/// total to within 100 ms of its CPU, a few ms at its 5% of a core).
+fn bridge_cpu(done: std::sync::Arc<std::sync::atomic::AtomicBool>) -> f64 {
+    let mut last = 0.0;
+    while !done.load(std::sync::atomic::Ordering::Relaxed) {
+        if let Some(s) = child_cpu(grains_protocol::Role::Bridge.binary()) {
+            last = s;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    last
+}
+
+/// One run of `kind`: stepping and whole wall time [s], and the bridge's CPU time [s].
+fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
     let connect = free_endpoint()?;
     let http = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?;
     let bridge = (kind > 0).then(|| grains_bridge::config::BridgeArgs {
@@ -117,12 +150,19 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
     };
     let mut overrides = vec![format!("run.duration={}", args.duration), "output.frames_every=0".to_string()];
     overrides.extend(args.overrides.iter().cloned());
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let sampler = {
+        let done = done.clone();
+        std::thread::spawn(move || bridge_cpu(done))
+    };
     let started = std::time::Instant::now();
     let outcome: anyhow::Result<RunOutcome> = run(&RunOptions {
         bridge,
         ..RunOptions::quiet(args.scene.clone(), args.out.join("runs"), overrides)
     });
     let whole = started.elapsed().as_secs_f64();
+    done.store(true, std::sync::atomic::Ordering::Relaxed);
+    let cpu = sampler.join().expect("the sampler thread");
     if let Some(b) = browser {
         let mut chromium = b.join().expect("the browser thread")?;
         let _ = chromium.kill();
@@ -138,30 +178,40 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64)> {
         bail!("{}: the run did not complete: {}", KINDS[kind], outcome.message);
     }
     let _ = std::fs::remove_dir_all(&outcome.dir);
-    Ok((outcome.stepping.as_secs_f64(), whole))
+    Ok((outcome.stepping.as_secs_f64(), whole, cpu))
 }
 
 pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let mut best = [(f64::INFINITY, f64::INFINITY); KINDS.len()];
+    // The bridge's CPU seconds of each run, for the median.
+    let mut cpu: [Vec<f64>; KINDS.len()] = Default::default();
     for r in 0..args.repeats {
         for (k, b) in best.iter_mut().enumerate() {
             tracing::info!("bench bridge: repeat {}/{}, {} ...", r + 1, args.repeats, KINDS[k]);
-            let (stepping, whole) = one(args, k)?;
+            let (stepping, whole, c) = one(args, k)?;
             *b = (b.0.min(stepping), b.1.min(whole));
+            cpu[k].push(c);
         }
     }
     let mut out = format!(
         "machine: {} cores; {} for {} s, {} runs of each kind alternating, fastest of each\n\n\
-         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge |\n|---|---:|---:|---:|---:|\n",
+         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge | bridge CPU s (median) |\n|---|---:|---:|---:|---:|---:|\n",
         std::thread::available_parallelism().map_or(0, |n| n.get()),
         args.scene.display(),
         args.duration,
         args.repeats,
     );
     for (k, (s, w)) in best.iter().enumerate() {
+        let mut c = cpu[k].clone();
+        c.sort_by(f64::total_cmp);
+        let c = if k == 0 {
+            "—".to_string()
+        } else {
+            format!("{:.2}", c[c.len() / 2])
+        };
         out.push_str(&format!(
-            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} |\n",
+            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} | {c} |\n",
             KINDS[k],
             s / best[0].0,
             w / best[0].1
