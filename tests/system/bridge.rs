@@ -642,23 +642,16 @@ fn the_live_viewer_draws_the_run_and_steers_only_as_its_user_may() {
     let out = out_dir("bridge-viewer");
     let connect = free_endpoint();
     let ep = endpoint(&connect, None);
-    let mut launcher = Running::grains(&[
-        "run",
-        "scenes/quickstart_hybrid_2d.toml",
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-        "--bridge",
-        "--bridge-listen",
-        &connect,
-        "--steering",
-        "--view",
-        "--set",
-        NO_FRAMES,
-    ]);
-    let err = launcher.wait_for("the live viewer of run", Duration::from_secs(60));
-    let run = run_id(&err);
-    let url = viewer_url(&err);
+    // The quickstart with a bridge (`bridge` its flags) and its viewer: launcher, run, URL.
+    let viewed = |bridge: &[&str]| {
+        let mut args = vec!["run", "scenes/quickstart_hybrid_2d.toml", "--out", out.to_str().unwrap()];
+        args.extend(["--quiet", "--bridge", "--set", NO_FRAMES]);
+        args.extend(bridge);
+        let mut launcher = Running::grains(&args);
+        let err = launcher.wait_for("the live viewer of run", Duration::from_secs(60));
+        (launcher, run_id(&err), viewer_url(&err))
+    };
+    let (mut launcher, run, url) = viewed(&["--bridge-listen", &connect, "--steering", "--view"]);
     wait_reachable(&ep, &run, &launcher);
     let pause = |ep: &Endpoint| {
         steer(ep, &run, br#"{"command":"pause"}"#).expect("an answer").expect("pause")["step"]
@@ -748,21 +741,7 @@ fn the_live_viewer_draws_the_run_and_steers_only_as_its_user_may() {
         ),
     )
     .unwrap();
-    let mut launcher = Running::grains(&[
-        "run",
-        "scenes/quickstart_hybrid_2d.toml",
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-        "--bridge",
-        "--bridge-config",
-        settings.to_str().unwrap(),
-        "--set",
-        NO_FRAMES,
-    ]);
-    let err = launcher.wait_for("the live viewer of run", Duration::from_secs(60));
-    let run = run_id(&err);
-    let url = viewer_url(&err);
+    let (mut launcher, run, url) = viewed(&["--bridge-config", settings.to_str().unwrap()]);
     let pilot = endpoint(&connect, Some(("pilot", "fly")));
     wait_reachable(&pilot, &run, &launcher);
     let seen = viewer_check(&url, None, &out.join("reader.png"), &["click", "btn-pause", "no answer"]);
