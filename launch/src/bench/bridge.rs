@@ -8,6 +8,10 @@
 //! the run's start or end shows), and their ratios to the run without a bridge; and the
 //! bridge's own CPU time (from `/proc`), which is what a run pays for a viewer whose browser
 //! runs on another machine.
+//!
+//! `--browser-core N` stands in for that other machine on this one: every run (all four kinds,
+//! so that they stay comparable) is held to the other cores and chromium to core N, so the
+//! browser's drawing takes nothing from the run while the bridge serving it still does.
 
 use crate::run::{RunOptions, RunOutcome, Status, run};
 use anyhow::{Context, bail};
@@ -32,6 +36,25 @@ pub struct BridgeArgs {
     /// Where the runs and the result table go.
     #[arg(long, default_value = "out/bench/bridge")]
     pub out: PathBuf,
+    /// Hold chromium to this core and every run to the others (a browser on its own machine).
+    #[arg(long, value_name = "CORE")]
+    pub browser_core: Option<usize>,
+}
+
+/// Holds the calling thread, and every process it starts from now on, to `cores`.
+fn pin(cores: impl IntoIterator<Item = usize>) -> std::io::Result<()> {
+    // SAFETY: a zeroed cpu_set_t is the empty set; CPU_SET and sched_setaffinity take it by
+    // pointer for the duration of the call.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        for c in cores {
+            libc::CPU_SET(c, &mut set);
+        }
+        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(())
 }
 
 /// The kinds of run, in the order they alternate.
@@ -78,9 +101,9 @@ fn stalled_client(connect: &str) -> anyhow::Result<(std::process::Child, std::th
     Ok((child, stopper))
 }
 
-/// Opens the viewer page at `http` in headless chromium once the bridge serves it; the
-/// browser runs until killed.
-fn viewer_page(http: std::net::SocketAddr) -> anyhow::Result<std::process::Child> {
+/// Opens the viewer page at `http` in headless chromium (held to `core` if given) once the
+/// bridge serves it; the browser runs until killed.
+fn viewer_page(http: std::net::SocketAddr, core: Option<usize>) -> anyhow::Result<std::process::Child> {
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
     while std::net::TcpStream::connect(http).is_err() {
         if std::time::Instant::now() > deadline {
@@ -88,7 +111,13 @@ fn viewer_page(http: std::net::SocketAddr) -> anyhow::Result<std::process::Child
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    std::process::Command::new("chromium")
+    let mut chromium = std::process::Command::new("chromium");
+    if let Some(c) = core {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: between fork and exec the closure only makes one system call.
+        unsafe { chromium.pre_exec(move || pin([c])) };
+    }
+    chromium
         .args([
             "--headless=new",
             "--no-sandbox",
@@ -144,7 +173,8 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
     });
     let client = if kind == 2 { Some(stalled_client(&connect)?) } else { None };
     let browser = if kind == 3 {
-        Some(std::thread::spawn(move || viewer_page(http)))
+        let core = args.browser_core;
+        Some(std::thread::spawn(move || viewer_page(http, core)))
     } else {
         None
     };
@@ -183,6 +213,16 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
 
 pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if let Some(b) = args.browser_core {
+        if b >= cores || cores < 2 {
+            bail!(
+                "--browser-core {b}: this machine has cores 0 to {}, and the runs need one besides the browser's",
+                cores - 1
+            );
+        }
+        pin((0..cores).filter(|&c| c != b)).context("holding the runs to the other cores")?;
+    }
     let mut best = [(f64::INFINITY, f64::INFINITY); KINDS.len()];
     // The bridge's CPU seconds of each run, for the median.
     let mut cpu: [Vec<f64>; KINDS.len()] = Default::default();
@@ -195,9 +235,11 @@ pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
         }
     }
     let mut out = format!(
-        "machine: {} cores; {} for {} s, {} runs of each kind alternating, fastest of each\n\n\
+        "machine: {} cores{}; {} for {} s, {} runs of each kind alternating, fastest of each\n\n\
          | run | stepping s | whole run s | stepping / no bridge | whole / no bridge | bridge CPU s (median) |\n|---|---:|---:|---:|---:|---:|\n",
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        cores,
+        args.browser_core
+            .map_or(String::new(), |b| format!(" (chromium on core {b}, the runs on the others)")),
         args.scene.display(),
         args.duration,
         args.repeats,
