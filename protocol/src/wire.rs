@@ -445,8 +445,8 @@ wire_type! {
         pub velocity: [f64; 3],
         /// Radius of a grain; half the spacing of a material point [m].
         pub size: f64,
-        /// Pressure −tr σ / d of a material point [Pa], positive in compression; NaN where
-        /// the solver does not say (the DEM's grains).
+        /// Pressure −tr σ / d [Pa], positive in compression: a material point's, or a
+        /// grain's Love–Weber mean stress over its volume; NaN where the solver does not say.
         pub pressure: f64,
     }
 }

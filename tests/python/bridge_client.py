@@ -54,9 +54,13 @@ def main():
             fail(f"view of {len(view.ids)} of {view.total} grains, positions {view.positions.shape}; the run has {n}")
         if not (view.sizes > 0).all() or not (view.speeds() >= 0).all():
             fail("a view size is not positive")
-        # Grains carry no pressure in a view (the DEM does not say): NaN, not a made-up 0.
-        if not (view.pressures.shape == (n,) and np.isnan(view.pressures).all()):
-            fail(f"the grains' view pressures should all be NaN: {view.pressures[:5]}")
+        # A grain's pressure is its contacts' mean stress: finite, never tensile without
+        # cohesion, and positive for the grains of a bed resting in its box.
+        p = view.pressures
+        if not (p.shape == (n,) and np.isfinite(p).all() and (p >= -1e-9 * p.max()).all()):
+            fail(f"the grains' view pressures should be finite and not negative: {p[:5]}")
+        if not (p > 0).mean() > 0.5:
+            fail(f"only {(p > 0).mean():.0%} of the grains of a resting bed have a pressure")
         print(f"view: {len(view.ids)} grains at step {view.step}, fastest {view.speeds().max():.3e} m/s")
 
         # A refusal is an exception, with the reason, and changes nothing.

@@ -72,7 +72,8 @@ class View:
     velocities: np.ndarray
     #: (n,) radius of a grain, half the spacing of a point [m]
     sizes: np.ndarray
-    #: (n,) pressure of a point [Pa, positive in compression]; NaN for a grain
+    #: (n,) pressure [Pa, positive in compression]: a point's, or a grain's contacts' mean stress
+    #: over its volume; NaN where the solver does not say
     pressures: np.ndarray
 
     def speeds(self) -> np.ndarray:

@@ -18,7 +18,7 @@
 use crate::contact::{ContactParams, Damping, contact_force, reduced_mass};
 use crate::neighbors::{NeighborList, PairSlot, periods, separation, wall_gap, wall_geometry};
 use crate::space::{Space, Vector};
-use crate::state::{DemState, WallShape};
+use crate::state::{DemState, Grains, WallShape};
 use rayon::prelude::*;
 
 /// What the pair loop reads of one grain, packed in one place (the arrays of
@@ -596,6 +596,30 @@ impl<S: Space> DemPipeline<S> {
             }
         }
         out
+    }
+
+    /// Each grain's pressure −tr σ / d, positive in compression: the Love–Weber mean stress
+    /// σ = (1/V) Σ l ⊗ f inside the grain over its own volume V (l from its centre to the
+    /// contact point, f the force on it), from the elastic forces of
+    /// [`DemPipeline::contact_forces`] and [`DemPipeline::wall_contact_forces`]. A continuum
+    /// over the same packing carries φ (the packing fraction) times the grains' mean.
+    pub fn grain_pressures(&self, state: &DemState<S>) -> Vec<f64> {
+        let g = &state.grains;
+        // Σ l · f per grain; l · f < 0 in compression.
+        let mut work = vec![0.0; g.len()];
+        for (i, j, f, d) in self.contact_forces(state) {
+            // d = x_i − x_j: i's contact point is at −r_i d/|d|, j's at +r_j d/|d|, and j
+            // feels −f.
+            let (dist, fd) = (d.length(), f.dot(d));
+            work[i] -= g.radius[i] / dist * fd;
+            work[j] -= g.radius[j] / dist * fd;
+        }
+        for (i, at, f) in self.wall_contact_forces(state) {
+            work[i] += (at - g.x[i]).dot(f);
+        }
+        (0..g.len())
+            .map(|i| -work[i] / (S::DIM as f64 * Grains::<S>::mass_of(g.radius[i], 1.0)))
+            .collect()
     }
 
     /// Gravitational potential energy −Σ m g·x [J].

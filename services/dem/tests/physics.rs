@@ -159,6 +159,35 @@ fn floor_carries_the_weight_of_a_resting_grain() {
     assert_close(-resting_load::<D3>(), mass::<D3>() * 9.81, 1e-3, "3D normal force");
 }
 
+/// Two grains stacked on a floor, at rest: each grain's Love–Weber pressure
+/// −(1/(d V)) Σ l · f from statics. The top grain bears its own weight at its lowest point
+/// (|l| = r); the bottom one bears the top's weight at its highest point and both weights at
+/// the floor, |l| = r − δ with δ = 2 m g / k_n.
+fn stacked_pressures<S: Space>() -> (Vec<f64>, [f64; 2]) {
+    let mut st = state::<S>(params(0.3, 0.5), [0.0, -9.81, 0.0]);
+    st.walls.push(floor::<S>(0.5));
+    st.grains.push(0, S::from_array([0.0, RADIUS, 0.0]), RADIUS, mass::<S>(), 0);
+    st.grains.push(1, S::from_array([0.0, 3.0 * RADIUS, 0.0]), RADIUS, mass::<S>(), 0);
+    let mut pipe = DemPipeline::<S>::new(1).unwrap();
+    pipe.run(&mut st, contact_time::<S>() / 100.0, 200_000);
+    let w = mass::<S>() * 9.81;
+    let volume = Grains::<S>::mass_of(RADIUS, 1.0) * S::DIM as f64;
+    let bottom = (RADIUS * w + (RADIUS - 2.0 * w / KN) * 2.0 * w) / volume;
+    let top = RADIUS * w / volume;
+    let order: Vec<u64> = st.grains.id.clone();
+    let p = pipe.grain_pressures(&st);
+    let by_id = |id: u64| p[order.iter().position(|&i| i == id).unwrap()];
+    (vec![by_id(0), by_id(1)], [bottom, top])
+}
+
+#[test]
+fn a_grain_s_pressure_is_its_contacts_mean_stress() {
+    for (dim, (p, expected)) in [(2, stacked_pressures::<D2>()), (3, stacked_pressures::<D3>())] {
+        assert_close(p[0], expected[0], 1e-3, &format!("{dim}D bottom grain's pressure"));
+        assert_close(p[1], expected[1], 1e-3, &format!("{dim}D top grain's pressure"));
+    }
+}
+
 /// A grain launched sliding without spin ends up rolling at v0 / (1 + I/(m r²)): 2/3 v0
 /// for a disk, 5/7 v0 for a solid sphere (angular momentum about the contact point is
 /// conserved; classic result, e.g. Goldstein).

@@ -233,7 +233,7 @@ const HIGH = [255, 225, 40]; // yellow
 const ramp = (t) => `rgb(${LOW.map((a, k) => Math.round(a + (HIGH[k] - a) * t)).join(",")})`;
 const RAMP = Array.from({ length: SPEED_BINS }, (_, i) => ramp(i / (SPEED_BINS - 1)));
 const speed = (v) => Math.hypot(v[0], v[1], v[2] || 0);
-const NO_VALUE = "#6b7480"; // grey: an item the colour's quantity says nothing of (a grain's pressure)
+const NO_VALUE = "#6b7480"; // grey: an item the colour's quantity says nothing of (NaN: a solver that does not say)
 const UNITS = { speed: "m/s", pressure: "Pa" };
 /** The coloured quantity of item i of view v, or null. */
 const quantity = {
@@ -340,7 +340,7 @@ function draw() {
     ctx.fillRect(8 * dpr, ty - 10 * dpr, gw, 10 * dpr);
     ctx.fillStyle = "#d8dee4";
     const range = hi >= lo ? `${fmt(lo, 3)} … ${fmt(hi, 3)} ${UNITS[mode]}` : `no ${mode} in the views`;
-    ctx.fillText(mode === "pressure" ? `${range} (grains: grey)` : range, 16 * dpr + gw, ty);
+    ctx.fillText(range, 16 * dpr + gw, ty);
   }
 
   viewer.drawn += 1;

@@ -214,15 +214,16 @@ impl<S: Space> Solver for DemSolver<S> {
 
     fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
         let g = &self.state.grains;
+        // Every contact is summed for the few grains shown: a view is made a few times a
+        // second, not every step.
+        let pressure = self.pipeline.grain_pressures(&self.state);
         for i in (0..g.len()).step_by(view_stride(g.len(), max)) {
             out.push(ViewPoint {
                 id: g.id[i],
                 position: S::to_array(g.x[i]),
                 velocity: S::to_array(g.v[i]),
                 size: g.radius[i],
-                // A grain's stress would need its contacts' forces summed (Love–Weber): not
-                // for a view.
-                pressure: f64::NAN,
+                pressure: pressure[i],
             });
         }
         g.len() as u64
