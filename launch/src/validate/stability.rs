@@ -234,28 +234,7 @@ fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
         let dt = f * critical;
         tracing::info!("validate: stability, DEM dt = {f} × critical ({dt:.2e} s)");
         let t0 = std::time::Instant::now();
-        let mut st = state0.clone();
-        let mut pipe = DemPipeline::<D2>::new(scene.threads as usize)?;
-        let energy = |pipe: &DemPipeline<D2>, st: &DemState<D2>| {
-            DemPipeline::kinetic_energy(st) + DemPipeline::potential_energy(st) + pipe.elastic_energy(st)
-        };
-        pipe.run(&mut st, dt, 1);
-        let e0 = energy(&pipe, &st);
-        let (mut gain, mut message) = (f64::NEG_INFINITY, String::new());
-        let steps = (duration / dt).ceil() as usize;
-        let chunk = 20;
-        for done in (0..steps).step_by(chunk) {
-            pipe.run(&mut st, dt, chunk.min(steps - done));
-            if let Some(id) = DemPipeline::first_non_finite(&st) {
-                gain = f64::NAN;
-                message = format!("grain {id} not finite at t = {:.2e} s", st.time);
-                break;
-            }
-            gain = gain.max((energy(&pipe, &st) - e0) / scale);
-            if gain > 1e3 {
-                break;
-            }
-        }
+        let (gain, mut message) = dem_probe(&state0, scene.threads as usize, dt, duration, scale)?;
         let stable = gain.is_finite() && gain <= ENERGY_GAIN;
         if stable || message.is_empty() {
             // What a user asking for this step is told.
@@ -276,8 +255,36 @@ fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
     Ok(probes)
 }
 
+/// The DEM map's probe: `state0` stepped at `dt` for `duration`; the largest rise of its total
+/// energy (kinetic + gravity + contact springs) over `scale`, NaN with the reason if a grain
+/// went non-finite. Stable: a rise of at most [`ENERGY_GAIN`] (the grains can only lose
+/// energy).
+fn dem_probe(state0: &DemState<D2>, threads: usize, dt: f64, duration: f64, scale: f64) -> anyhow::Result<(f64, String)> {
+    let mut st = state0.clone();
+    let mut pipe = DemPipeline::<D2>::new(threads)?;
+    let energy = |pipe: &DemPipeline<D2>, st: &DemState<D2>| {
+        DemPipeline::kinetic_energy(st) + DemPipeline::potential_energy(st) + pipe.elastic_energy(st)
+    };
+    pipe.run(&mut st, dt, 1);
+    let e0 = energy(&pipe, &st);
+    let mut gain = f64::NEG_INFINITY;
+    let steps = (duration / dt).ceil() as usize;
+    let chunk = 20;
+    for done in (0..steps).step_by(chunk) {
+        pipe.run(&mut st, dt, chunk.min(steps - done));
+        if let Some(id) = DemPipeline::first_non_finite(&st) {
+            return Ok((f64::NAN, format!("grain {id} not finite at t = {:.2e} s", st.time)));
+        }
+        gain = gain.max((energy(&pipe, &st) - e0) / scale);
+        if gain > 1e3 {
+            break;
+        }
+    }
+    Ok((gain, String::new()))
+}
+
 fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
-    use grains_mpm::pipeline::{MpmPipeline, cfl_time_step};
+    use grains_mpm::pipeline::cfl_time_step;
     let a = 1.0;
     let path = args.scenes.join(MPM);
     let scene = load_with(&path, &[format!("body.0.max=[{L0_COLUMN},{}]", a * L0_COLUMN)])?;
@@ -295,22 +302,7 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
         let dt = f * limit;
         tracing::info!("validate: stability, MPM CFL {f} ({dt:.2e} s)");
         let t0 = std::time::Instant::now();
-        let mut pts = pts0.clone();
-        let mut pipe = MpmPipeline::new(scene.threads as usize).map_err(anyhow::Error::msg)?;
-        let (mut ke_max, mut message) = (0.0f64, String::new());
-        let steps = (duration / dt).ceil() as usize;
-        for _ in 0..steps {
-            if let Err(e) = pipe.step(&mut pts, &params, dt) {
-                message = e.to_string();
-                ke_max = f64::NAN;
-                break;
-            }
-            let ke: f64 = pts.mass.iter().zip(&pts.v).map(|(m, v)| 0.5 * m * v.length_squared()).sum();
-            ke_max = ke_max.max(ke / scale);
-            if !ke_max.is_finite() || ke_max > 1e3 {
-                break;
-            }
-        }
+        let (ke_max, mut message) = mpm_probe(&pts0, &params, scene.threads as usize, dt, duration, scale)?;
         let stable = ke_max.is_finite() && ke_max <= 1.0;
         let mut s = scene.clone();
         s.dt = dt;
@@ -327,6 +319,34 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
         });
     }
     Ok(probes)
+}
+
+/// The MPM map's probe: `pts0` stepped at `dt` for `duration`; the largest kinetic energy
+/// over `scale`, NaN with the solver's reason if a step failed. Stable: at most 1 (with
+/// `scale` = m g H / 2, all the energy gravity can release).
+fn mpm_probe(
+    pts0: &grains_mpm::points::Points<grains_grid::D2>,
+    params: &grains_mpm::pipeline::MpmParams<grains_grid::D2>,
+    threads: usize,
+    dt: f64,
+    duration: f64,
+    scale: f64,
+) -> anyhow::Result<(f64, String)> {
+    let mut pts = pts0.clone();
+    let mut pipe = grains_mpm::pipeline::MpmPipeline::new(threads).map_err(anyhow::Error::msg)?;
+    let mut ke_max = 0.0f64;
+    let steps = (duration / dt).ceil() as usize;
+    for _ in 0..steps {
+        if let Err(e) = pipe.step(&mut pts, params, dt) {
+            return Ok((f64::NAN, e.to_string()));
+        }
+        let ke: f64 = pts.mass.iter().zip(&pts.v).map(|(m, v)| 0.5 * m * v.length_squared()).sum();
+        ke_max = ke_max.max(ke / scale);
+        if !ke_max.is_finite() || ke_max > 1e3 {
+            break;
+        }
+    }
+    Ok((ke_max, String::new()))
 }
 
 /// The process maps of the hybrid: substeps k and the cell / grain ratio.
@@ -455,4 +475,56 @@ fn cell_map(args: &ValidateArgs, part: &mut Part, md: &mut String, packing: &std
         ),
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run::steps::{Limit, load};
+    use grains_service::zones::ZoneField;
+
+    /// `coupling.substeps = "auto"` never picks a step that the maps' probes call unstable:
+    /// on a small hybrid block (tests/scenes/hybrid_small_2d.toml), with the MPM's limit
+    /// setting the macro-step (the DEM at its own stable step), then with a continuum stiff
+    /// enough that the MPM's limit falls below the DEM's (k = 1, the DEM step brought down to
+    /// it), the DEM's grains and the MPM's points are each stable for 20 ms at the steps
+    /// chosen, by the criteria of the maps. The same probes at the maps' first unstable
+    /// settings (2 × the critical step, CFL 1.5) must fail, or they could not catch a bad choice.
+    #[test]
+    fn automatic_steps_stay_where_the_stability_maps_say_stable() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/scenes/hybrid_small_2d.toml");
+        let (duration, height, g) = (0.02, 0.016, 9.81);
+        for (stiff, limit) in [(false, Limit::Mpm), (true, Limit::Dem)] {
+            let mut overrides = vec!["coupling.substeps=\"auto\"".to_string(), "run.dt=1e-3".to_string()];
+            if stiff {
+                overrides.push("material.0.mpm.young=2.5e9".to_string());
+            }
+            let (scene, _, chosen) = load(&path, &overrides).unwrap();
+            let c = chosen.expect("an auto scene");
+            assert_eq!(c.limit, limit, "{c}");
+            let zones = ZoneField::layered(&scene);
+
+            let state0 = grains_dem_service::setup::build_state::<D2>(&scene, &zones).unwrap();
+            let grains = &state0.grains;
+            let free = (0..grains.len()).filter(|&i| !grains.frozen[i]);
+            let m_min = free.clone().map(|i| grains.mass[i]).fold(f64::INFINITY, f64::min);
+            let scale = free.map(|i| grains.mass[i]).sum::<f64>() * g * 0.5 * height;
+            let critical = critical_time_step(&state0.params.materials[0], m_min);
+            let (gain, why) = dem_probe(&state0, 1, c.dem_dt, duration, scale).unwrap();
+            assert!(gain <= ENERGY_GAIN, "{c}: the DEM's energy rose by {gain:.3e} of m g H / 2 {why}");
+            let (gain, _) = dem_probe(&state0, 1, 2.0 * critical, duration, scale).unwrap();
+            assert!(
+                !(gain <= ENERGY_GAIN),
+                "the DEM probe at twice the critical step saw a rise of only {gain:.3e}"
+            );
+
+            let (pts0, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&scene, &zones).unwrap();
+            let scale = pts0.mass.iter().sum::<f64>() * g * 0.5 * height;
+            let (ke, why) = mpm_probe(&pts0, &params, 1, c.dt, duration, scale).unwrap();
+            assert!(ke <= 1.0, "{c}: the MPM's kinetic energy reached {ke:.3e} of m g H / 2 {why}");
+            let cfl_one = c.mpm_limit / MAX_CFL;
+            let (ke, _) = mpm_probe(&pts0, &params, 1, 1.5 * cfl_one, duration, scale).unwrap();
+            assert!(!(ke <= 1.0), "the MPM probe at CFL 1.5 saw a kinetic energy of only {ke:.3e}");
+        }
+    }
 }
