@@ -19,7 +19,7 @@ use super::column::run_case;
 use super::deposit::{BIN, FRONT_HEIGHT, deposit, front, profile, profile_l1};
 use super::packings;
 use super::runs::{RunResult, finished, load_with};
-use super::scenes::column::{DEM, HYBRID, L0, MPM};
+use super::scenes::column::{BOTTOM, DEM, HYBRID, L0, MPM};
 use super::scenes::silo::SCENE as SILO;
 use super::silo::{self, Model};
 use crate::metrics::MetricsTable;
@@ -39,6 +39,10 @@ struct Row {
     l1: f64,
     grains: u64,
     points: u64,
+    /// The run, for its picture.
+    dir: std::path::PathBuf,
+    /// The deposit's front [m] (column only; NaN otherwise).
+    front: f64,
 }
 
 pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
@@ -61,8 +65,28 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             &column,
         ),
     )?;
+    let reach = column.iter().map(|r| r.front).fold(L0, f64::max);
+    super::pictures::last_frames(
+        &mut part,
+        &args.out,
+        "cost_column_pictures",
+        "Column collapse a = 1: the deposit of every run of the chart, one row per model",
+        &by_family(&column),
+        Some(([0.0, 0.0], [1.15 * reach, 1.15 * (BOTTOM + L0)])),
+    )?;
     let silo = silo_rows(args)?;
     table(&mut md, "Silo, 6-mm orifice (error: discharge rate)", &silo, false);
+    let labelled: Vec<(String, &std::path::Path)> = by_family(&silo).into_iter().flatten().collect();
+    let runs: Vec<(&str, &std::path::Path)> = labelled.iter().map(|(l, d)| (l.as_str(), *d)).collect();
+    super::pictures::side_by_side(
+        &mut part,
+        &args.out,
+        "cost_silo_pictures",
+        "Silo, 6-mm orifice: every run of the chart at 0.25 s",
+        &runs,
+        &[0.25],
+        None,
+    )?;
     part.chart(
         &args.out,
         "cost_silo",
@@ -96,6 +120,20 @@ fn table(md: &mut String, title: &str, rows: &[Row], l1: bool) {
         );
     }
     md.push('\n');
+}
+
+/// The rows' runs grouped by model (DEM, MPM, hybrid), each labelled by its run.
+fn by_family(rows: &[Row]) -> Vec<Vec<(String, &std::path::Path)>> {
+    ["DEM", "MPM", "hybrid"]
+        .iter()
+        .map(|family| {
+            rows.iter()
+                .filter(|r| r.family == *family)
+                // The label without its note in brackets.
+                .map(|r| (format!("{family} {}", r.label.split(" (").next().unwrap_or("")), r.dir.as_path()))
+                .collect()
+        })
+        .collect()
 }
 
 fn cost_chart(title: &str, y: &str, rows: &[Row]) -> Chart {
@@ -157,6 +195,8 @@ fn column_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             l1: profile_l1(&h_ref, &h, (f).max(runout_ref + L0)),
             grains: r.grains,
             points: r.points,
+            dir: r.dir.clone(),
+            front: f,
         });
         Ok(())
     };
@@ -241,6 +281,8 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
                 .participant(Role::Mpm, "items")?
                 .map_or(0.0, |v| v.iter().sum::<f64>() / v.len().max(1) as f64)
                 .round() as u64,
+            dir: r.dir,
+            front: f64::NAN,
         });
         Ok(())
     };
@@ -264,6 +306,7 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
     }
     let reference_wall = reference.wall;
     let grains = reference.grains.round() as u64;
+    let dir = reference.dir.clone();
     rows.insert(
         0,
         Row {
@@ -274,6 +317,8 @@ fn silo_rows(args: &ValidateArgs) -> anyhow::Result<Vec<Row>> {
             l1: f64::NAN,
             grains,
             points: 0,
+            dir,
+            front: f64::NAN,
         },
     );
     Ok(rows)

@@ -1,6 +1,7 @@
 //! The runs of a part drawn side by side: one column per run (DEM, hybrid, MPM), one row per
-//! moment, each run's frame nearest that moment, all in the same view; grains sand, material
-//! points blue, so that the hybrid's zones show.
+//! moment, each run's frame nearest that moment, all in the same view; or each run's last
+//! frame, one row per model. Grains sand, material points blue, so that the hybrid's zones
+//! show.
 
 use crate::render::{Colour, Scene2, frame, frame_times, panels};
 use crate::report::Part;
@@ -42,6 +43,34 @@ pub fn side_by_side(
         }
     }
     panels(&rows, Colour::Model, PANEL, &out.join(format!("{stem}.png")))?;
+    part.pictures.push((stem.to_string(), caption.to_string()));
+    Ok(())
+}
+
+/// Draws the last frame of each run of `rows` (one row per model: (label, run directory))
+/// into `<out>/<stem>.png`, all in `view`, and lists it under `part`. A run without frames is
+/// an error: every run drawn here wrote its end.
+pub fn last_frames(
+    part: &mut Part,
+    out: &Path,
+    stem: &str,
+    caption: &str,
+    rows: &[Vec<(String, &Path)>],
+    view: Option<([f64; 2], [f64; 2])>,
+) -> anyhow::Result<()> {
+    let mut drawn = Vec::new();
+    for row in rows.iter().filter(|r| !r.is_empty()) {
+        let mut panels_of_row = Vec::new();
+        for (label, dir) in row {
+            let (t, step) = frame_times(dir)?
+                .into_iter()
+                .max_by(|a, b| a.0.total_cmp(&b.0))
+                .ok_or_else(|| anyhow::anyhow!("{}: no frame to draw", dir.display()))?;
+            panels_of_row.push((format!("{label}, t = {t:.2} s"), frame(dir, step, view)?));
+        }
+        drawn.push(panels_of_row);
+    }
+    panels(&drawn, Colour::Model, PANEL, &out.join(format!("{stem}.png")))?;
     part.pictures.push((stem.to_string(), caption.to_string()));
     Ok(())
 }
