@@ -5,13 +5,16 @@
 //! headless chromium (Debian's `chromium`; it draws every view), alternating, fastest of the repeats each
 //! (the machine is shared: the fastest run is the least disturbed). Figures: wall time of the
 //! stepping (release to last row) and of the whole run (start to end, so a bridge that holds up
-//! the run's start or end shows), and their ratios to the run without a bridge; and the
-//! bridge's own CPU time (from `/proc`), which is what a run pays for a viewer whose browser
-//! runs on another machine.
+//! the run's start or end shows), and their ratios to the run without a bridge; the bridge's
+//! own CPU time (from `/proc`), which is what a run pays for a viewer whose browser runs on
+//! another machine; and the CPU time of all the run's processes (steadier than wall time on a
+//! shared machine).
 //!
-//! `--browser-core N` stands in for that other machine on this one: every run (all four kinds,
-//! so that they stay comparable) is held to the other cores and chromium to core N, so the
-//! browser's drawing takes nothing from the run while the bridge serving it still does.
+//! `--browser-idle` stands in for that other machine on this one: chromium runs under
+//! SCHED_IDLE, so it draws only on a core the run leaves idle and gives it up the moment a
+//! run's process wakes, while the bridge serving it still takes its share. (Holding the run to
+//! one core and the browser to the other measured a one-core run instead, which waits on every
+//! handshake: +1% to +20% between sessions.)
 
 use crate::run::{RunOptions, RunOutcome, Status, run};
 use anyhow::{Context, bail};
@@ -36,23 +39,18 @@ pub struct BridgeArgs {
     /// Where the runs and the result table go.
     #[arg(long, default_value = "out/bench/bridge")]
     pub out: PathBuf,
-    /// Hold chromium to this core and every run to the others (a browser on its own machine).
-    #[arg(long, value_name = "CORE")]
-    pub browser_core: Option<usize>,
+    /// Run chromium under SCHED_IDLE: it draws only on a core the run leaves idle and yields it
+    /// the moment a run's process wakes (a browser on its own machine, the run on all cores).
+    #[arg(long)]
+    pub browser_idle: bool,
 }
 
-/// Holds the calling thread, and every process it starts from now on, to `cores`.
-fn pin(cores: impl IntoIterator<Item = usize>) -> std::io::Result<()> {
-    // SAFETY: a zeroed cpu_set_t is the empty set; CPU_SET and sched_setaffinity take it by
-    // pointer for the duration of the call.
-    unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        for c in cores {
-            libc::CPU_SET(c, &mut set);
-        }
-        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
+/// Puts the calling process under SCHED_IDLE (its children inherit it).
+fn idle() -> std::io::Result<()> {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: sched_setscheduler reads the param for the duration of the call.
+    if unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } != 0 {
+        return Err(std::io::Error::last_os_error());
     }
     Ok(())
 }
@@ -103,7 +101,7 @@ fn stalled_client(connect: &str) -> anyhow::Result<(std::process::Child, std::th
 
 /// Opens the viewer page at `http` in headless chromium (held to `core` if given) once the
 /// bridge serves it; the browser runs until killed.
-fn viewer_page(http: std::net::SocketAddr, core: Option<usize>) -> anyhow::Result<std::process::Child> {
+fn viewer_page(http: std::net::SocketAddr, idle_policy: bool) -> anyhow::Result<std::process::Child> {
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
     while std::net::TcpStream::connect(http).is_err() {
         if std::time::Instant::now() > deadline {
@@ -112,10 +110,10 @@ fn viewer_page(http: std::net::SocketAddr, core: Option<usize>) -> anyhow::Resul
         std::thread::sleep(Duration::from_millis(50));
     }
     let mut chromium = std::process::Command::new("chromium");
-    if let Some(c) = core {
+    if idle_policy {
         use std::os::unix::process::CommandExt;
         // SAFETY: between fork and exec the closure only makes one system call.
-        unsafe { chromium.pre_exec(move || pin([c])) };
+        unsafe { chromium.pre_exec(idle) };
     }
     chromium
         .args([
@@ -162,8 +160,21 @@ fn bridge_cpu(done: std::sync::Arc<std::sync::atomic::AtomicBool>) -> f64 {
     last
 }
 
-/// One run of `kind`: stepping and whole wall time [s], and the bridge's CPU time [s].
-fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
+/// CPU seconds (user + system) of this process's children that have ended and been waited for.
+fn children_cpu() -> f64 {
+    // SAFETY: getrusage fills the zeroed struct it is given.
+    let u = unsafe {
+        let mut u: libc::rusage = std::mem::zeroed();
+        libc::getrusage(libc::RUSAGE_CHILDREN, &mut u);
+        u
+    };
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    secs(u.ru_utime) + secs(u.ru_stime)
+}
+
+/// One run of `kind`: stepping and whole wall time [s], the bridge's CPU time [s], and the
+/// CPU time of all the run's processes, the bridge's included [s].
+fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64, f64)> {
     let connect = free_endpoint()?;
     let http = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?;
     let bridge = (kind > 0).then(|| grains_bridge::config::BridgeArgs {
@@ -173,8 +184,8 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
     });
     let client = if kind == 2 { Some(stalled_client(&connect)?) } else { None };
     let browser = if kind == 3 {
-        let core = args.browser_core;
-        Some(std::thread::spawn(move || viewer_page(http, core)))
+        let idle_policy = args.browser_idle;
+        Some(std::thread::spawn(move || viewer_page(http, idle_policy)))
     } else {
         None
     };
@@ -186,11 +197,14 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
         std::thread::spawn(move || bridge_cpu(done))
     };
     let started = std::time::Instant::now();
+    let cpu0 = children_cpu();
     let outcome: anyhow::Result<RunOutcome> = run(&RunOptions {
         bridge,
         ..RunOptions::quiet(args.scene.clone(), args.out.join("runs"), overrides)
     });
     let whole = started.elapsed().as_secs_f64();
+    // The run's processes have all been waited for; the browser and the client are not yet.
+    let run_cpu = children_cpu() - cpu0;
     done.store(true, std::sync::atomic::Ordering::Relaxed);
     let cpu = sampler.join().expect("the sampler thread");
     if let Some(b) = browser {
@@ -208,55 +222,65 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64)> {
         bail!("{}: the run did not complete: {}", KINDS[kind], outcome.message);
     }
     let _ = std::fs::remove_dir_all(&outcome.dir);
-    Ok((outcome.stepping.as_secs_f64(), whole, cpu))
+    Ok((outcome.stepping.as_secs_f64(), whole, cpu, run_cpu))
 }
 
 pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if let Some(b) = args.browser_core {
-        if b >= cores || cores < 2 {
-            bail!(
-                "--browser-core {b}: this machine has cores 0 to {}, and the runs need one besides the browser's",
-                cores - 1
-            );
-        }
-        pin((0..cores).filter(|&c| c != b)).context("holding the runs to the other cores")?;
-    }
     let mut best = [(f64::INFINITY, f64::INFINITY); KINDS.len()];
-    // The bridge's CPU seconds of each run, for the median.
+    // The bridge's and the whole run's CPU seconds of each run, for their medians.
     let mut cpu: [Vec<f64>; KINDS.len()] = Default::default();
+    let mut run_cpu: [Vec<f64>; KINDS.len()] = Default::default();
+    // Each run's stepping time over the run without a bridge of the same repeat (a pair run
+    // back to back sees the same load), for the median.
+    let mut paired: [Vec<f64>; KINDS.len()] = Default::default();
     for r in 0..args.repeats {
+        let mut alone = f64::NAN;
         for (k, b) in best.iter_mut().enumerate() {
             tracing::info!("bench bridge: repeat {}/{}, {} ...", r + 1, args.repeats, KINDS[k]);
-            let (stepping, whole, c) = one(args, k)?;
+            let (stepping, whole, c, rc) = one(args, k)?;
+            if k == 0 {
+                alone = stepping;
+            }
+            paired[k].push(stepping / alone);
             *b = (b.0.min(stepping), b.1.min(whole));
             cpu[k].push(c);
+            run_cpu[k].push(rc);
         }
     }
+    let median = |v: &[f64]| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
     let mut out = format!(
-        "machine: {} cores{}; {} for {} s, {} runs of each kind alternating, fastest of each\n\n\
-         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge | bridge CPU s (median) |\n|---|---:|---:|---:|---:|---:|\n",
+        "machine: {} cores{}; {} for {} s, {} runs of each kind alternating, fastest of each; paired: the median over \
+         the repeats of the stepping time over that repeat's run without a bridge; CPU: medians (the run's: all its \
+         processes, the bridge's included)\n\n\
+         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge | paired | bridge CPU s | run CPU s | run CPU / no bridge |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         cores,
-        args.browser_core
-            .map_or(String::new(), |b| format!(" (chromium on core {b}, the runs on the others)")),
+        if args.browser_idle { " (chromium under SCHED_IDLE)" } else { "" },
         args.scene.display(),
         args.duration,
         args.repeats,
     );
+    let run_cpu0 = median(&run_cpu[0]);
     for (k, (s, w)) in best.iter().enumerate() {
-        let mut c = cpu[k].clone();
-        c.sort_by(f64::total_cmp);
         let c = if k == 0 {
             "—".to_string()
         } else {
-            format!("{:.2}", c[c.len() / 2])
+            format!("{:.2}", median(&cpu[k]))
         };
+        let rc = median(&run_cpu[k]);
         out.push_str(&format!(
-            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} | {c} |\n",
+            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} | {:.3} | {c} | {rc:.2} | {:.3} |\n",
             KINDS[k],
             s / best[0].0,
-            w / best[0].1
+            w / best[0].1,
+            median(&paired[k]),
+            rc / run_cpu0
         ));
     }
     println!("{out}");
