@@ -35,6 +35,16 @@ use std::fmt::Write as _;
 /// A run is unstable when the energy rises by this share of m g H / 2.
 const ENERGY_GAIN: f64 = 0.1;
 
+/// The DEM map's criterion on [`dem_probe`]'s energy rise.
+fn dem_stable(gain: f64) -> bool {
+    gain.is_finite() && gain <= ENERGY_GAIN
+}
+
+/// The MPM map's criterion on [`mpm_probe`]'s kinetic energy over m g H / 2.
+fn mpm_stable(ke: f64) -> bool {
+    ke.is_finite() && ke <= 1.0
+}
+
 /// One run of a stability map.
 struct Probe {
     knob: f64,
@@ -235,7 +245,7 @@ fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
         tracing::info!("validate: stability, DEM dt = {f} × critical ({dt:.2e} s)");
         let t0 = std::time::Instant::now();
         let (gain, mut message) = dem_probe(&state0, scene.threads as usize, dt, duration, scale)?;
-        let stable = gain.is_finite() && gain <= ENERGY_GAIN;
+        let stable = dem_stable(gain);
         if stable || message.is_empty() {
             // What a user asking for this step is told.
             let mut s = scene.clone();
@@ -257,8 +267,8 @@ fn dem_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
 
 /// The DEM map's probe: `state0` stepped at `dt` for `duration`; the largest rise of its total
 /// energy (kinetic + gravity + contact springs) over `scale`, NaN with the reason if a grain
-/// went non-finite. Stable: a rise of at most [`ENERGY_GAIN`] (the grains can only lose
-/// energy).
+/// went non-finite. Stable ([`dem_stable`]): a rise of at most [`ENERGY_GAIN`] (the grains
+/// can only lose energy).
 fn dem_probe(state0: &DemState<D2>, threads: usize, dt: f64, duration: f64, scale: f64) -> anyhow::Result<(f64, String)> {
     let mut st = state0.clone();
     let mut pipe = DemPipeline::<D2>::new(threads)?;
@@ -303,7 +313,7 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
         tracing::info!("validate: stability, MPM CFL {f} ({dt:.2e} s)");
         let t0 = std::time::Instant::now();
         let (ke_max, mut message) = mpm_probe(&pts0, &params, scene.threads as usize, dt, duration, scale)?;
-        let stable = ke_max.is_finite() && ke_max <= 1.0;
+        let stable = mpm_stable(ke_max);
         let mut s = scene.clone();
         s.dt = dt;
         if let Err((field, refusal)) = grains_mpm_service::setup::check(&s) {
@@ -322,8 +332,8 @@ fn mpm_map(args: &ValidateArgs) -> anyhow::Result<Vec<Probe>> {
 }
 
 /// The MPM map's probe: `pts0` stepped at `dt` for `duration`; the largest kinetic energy
-/// over `scale`, NaN with the solver's reason if a step failed. Stable: at most 1 (with
-/// `scale` = m g H / 2, all the energy gravity can release).
+/// over `scale`, NaN with the solver's reason if a step failed. Stable ([`mpm_stable`]): at
+/// most 1 (with `scale` = m g H / 2, all the energy gravity can release).
 fn mpm_probe(
     pts0: &grains_mpm::points::Points<grains_grid::D2>,
     params: &grains_mpm::pipeline::MpmParams<grains_grid::D2>,
@@ -511,20 +521,20 @@ mod tests {
             let scale = free.map(|i| grains.mass[i]).sum::<f64>() * g * 0.5 * height;
             let critical = critical_time_step(&state0.params.materials[0], m_min);
             let (gain, why) = dem_probe(&state0, 1, c.dem_dt, duration, scale).unwrap();
-            assert!(gain <= ENERGY_GAIN, "{c}: the DEM's energy rose by {gain:.3e} of m g H / 2 {why}");
+            assert!(dem_stable(gain), "{c}: the DEM's energy rose by {gain:.3e} of m g H / 2 {why}");
             let (gain, _) = dem_probe(&state0, 1, 2.0 * critical, duration, scale).unwrap();
             assert!(
-                !(gain <= ENERGY_GAIN),
+                !dem_stable(gain),
                 "the DEM probe at twice the critical step saw a rise of only {gain:.3e}"
             );
 
             let (pts0, params) = grains_mpm_service::setup::build::<grains_grid::D2>(&scene, &zones).unwrap();
             let scale = pts0.mass.iter().sum::<f64>() * g * 0.5 * height;
             let (ke, why) = mpm_probe(&pts0, &params, 1, c.dt, duration, scale).unwrap();
-            assert!(ke <= 1.0, "{c}: the MPM's kinetic energy reached {ke:.3e} of m g H / 2 {why}");
+            assert!(mpm_stable(ke), "{c}: the MPM's kinetic energy reached {ke:.3e} of m g H / 2 {why}");
             let cfl_one = c.mpm_limit / MAX_CFL;
             let (ke, _) = mpm_probe(&pts0, &params, 1, 1.5 * cfl_one, duration, scale).unwrap();
-            assert!(!(ke <= 1.0), "the MPM probe at CFL 1.5 saw a kinetic energy of only {ke:.3e}");
+            assert!(!mpm_stable(ke), "the MPM probe at CFL 1.5 saw a kinetic energy of only {ke:.3e}");
         }
     }
 }

@@ -600,19 +600,25 @@ impl<S: Space> DemPipeline<S> {
 
     /// Each grain's pressure −tr σ / d, positive in compression: the Love–Weber mean stress
     /// σ = (1/V) Σ l ⊗ f inside the grain over its own volume V (l from its centre to the
-    /// contact point, f the force on it), from the elastic forces of
+    /// contact point, which splits the centres' distance by the radii as Yue 2018 Alg. 11's
+    /// homogenization does; f the force on it), from the elastic forces of
     /// [`DemPipeline::contact_forces`] and [`DemPipeline::wall_contact_forces`]. A continuum
-    /// over the same packing carries φ (the packing fraction) times the grains' mean.
+    /// over the same packing carries φ (the packing fraction) times the grains' mean. All NaN
+    /// when the grains changed since the last step (an epoch's exchange): their contacts are
+    /// not known until the next.
     pub fn grain_pressures(&self, state: &DemState<S>) -> Vec<f64> {
         let g = &state.grains;
+        if !self.prepared {
+            return vec![f64::NAN; g.len()];
+        }
         // Σ l · f per grain; l · f < 0 in compression.
         let mut work = vec![0.0; g.len()];
         for (i, j, f, d) in self.contact_forces(state) {
-            // d = x_i − x_j: i's contact point is at −r_i d/|d|, j's at +r_j d/|d|, and j
-            // feels −f.
-            let (dist, fd) = (d.length(), f.dot(d));
-            work[i] -= g.radius[i] / dist * fd;
-            work[j] -= g.radius[j] / dist * fd;
+            // d = x_i − x_j: i's arm is −r_i/(r_i + r_j) d, j's +r_j/(r_i + r_j) d, and j
+            // feels −f; the two add up to −d · f.
+            let (sum, fd) = (g.radius[i] + g.radius[j], f.dot(d));
+            work[i] -= g.radius[i] / sum * fd;
+            work[j] -= g.radius[j] / sum * fd;
         }
         for (i, at, f) in self.wall_contact_forces(state) {
             work[i] += (at - g.x[i]).dot(f);

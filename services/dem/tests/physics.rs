@@ -160,9 +160,9 @@ fn floor_carries_the_weight_of_a_resting_grain() {
 }
 
 /// Two grains stacked on a floor, at rest: each grain's Love–Weber pressure
-/// −(1/(d V)) Σ l · f from statics. The top grain bears its own weight at its lowest point
-/// (|l| = r); the bottom one bears the top's weight at its highest point and both weights at
-/// the floor, |l| = r − δ with δ = 2 m g / k_n.
+/// −(1/(d V)) Σ l · f from statics. The top grain bears its own weight where it touches the
+/// bottom one (equal radii: |l| = r − δ/2, δ = m g / k_n their overlap); the bottom one bears
+/// the top's weight there and both weights at the floor (|l| = r − 2 m g / k_n).
 fn stacked_pressures<S: Space>() -> (Vec<f64>, [f64; 2]) {
     let mut st = state::<S>(params(0.3, 0.5), [0.0, -9.81, 0.0]);
     st.walls.push(floor::<S>(0.5));
@@ -172,12 +172,12 @@ fn stacked_pressures<S: Space>() -> (Vec<f64>, [f64; 2]) {
     pipe.run(&mut st, contact_time::<S>() / 100.0, 200_000);
     let w = mass::<S>() * 9.81;
     let volume = Grains::<S>::mass_of(RADIUS, 1.0) * S::DIM as f64;
-    let bottom = (RADIUS * w + (RADIUS - 2.0 * w / KN) * 2.0 * w) / volume;
-    let top = RADIUS * w / volume;
-    let order: Vec<u64> = st.grains.id.clone();
+    let between = (RADIUS - 0.5 * w / KN) * w;
+    let bottom = (between + (RADIUS - 2.0 * w / KN) * 2.0 * w) / volume;
+    let top = between / volume;
     let p = pipe.grain_pressures(&st);
-    let by_id = |id: u64| p[order.iter().position(|&i| i == id).unwrap()];
-    (vec![by_id(0), by_id(1)], [bottom, top])
+    let of = |id: u64| p[st.grains.index_of(id).unwrap()];
+    (vec![of(0), of(1)], [bottom, top])
 }
 
 #[test]
