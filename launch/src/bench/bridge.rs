@@ -7,8 +7,8 @@
 //! stepping (release to last row) and of the whole run (start to end, so a bridge that holds up
 //! the run's start or end shows), and their ratios to the run without a bridge; the bridge's
 //! own CPU time (from `/proc`), which is what a run pays for a viewer whose browser runs on
-//! another machine; and the CPU time of all the run's processes (steadier than wall time on a
-//! shared machine).
+//! another machine; the browser's CPU time (what it drew with); and the CPU time of the run's
+//! child processes (the participants and the bridge).
 //!
 //! `--browser-idle` stands in for that other machine on this one: chromium runs under
 //! SCHED_IDLE, so it draws only on a core the run leaves idle and gives it up the moment a
@@ -99,8 +99,8 @@ fn stalled_client(connect: &str) -> anyhow::Result<(std::process::Child, std::th
     Ok((child, stopper))
 }
 
-/// Opens the viewer page at `http` in headless chromium (held to `core` if given) once the
-/// bridge serves it; the browser runs until killed.
+/// Opens the viewer page at `http` in headless chromium (under SCHED_IDLE if `idle_policy`)
+/// once the bridge serves it; the browser runs until killed.
 fn viewer_page(http: std::net::SocketAddr, idle_policy: bool) -> anyhow::Result<std::process::Child> {
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
     while std::net::TcpStream::connect(http).is_err() {
@@ -130,31 +130,38 @@ fn viewer_page(http: std::net::SocketAddr, idle_policy: bool) -> anyhow::Result<
         .context("starting chromium (Debian's chromium) for the viewer")
 }
 
-/// CPU seconds (user + system) of our child process named `name`, if there is one now.
-fn child_cpu(name: &str) -> Option<f64> {
-    let me = std::process::id().to_string();
+/// CPU seconds (user + system) of the processes alive now whose name and parent's pid pass
+/// `pick`, summed.
+fn cpu_of(pick: impl Fn(&str, &str) -> bool) -> f64 {
     // SAFETY: sysconf has no preconditions.
     let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
-    std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
-        let stat = std::fs::read_to_string(e.path().join("stat")).ok()?;
-        // pid (comm) state ppid ... utime stime: fields 14 and 15; comm may hold spaces.
-        let (comm, rest) = stat.split_once(" (")?.1.rsplit_once(") ")?;
-        let f: Vec<&str> = rest.split_whitespace().collect();
-        if comm != name || f.get(1) != Some(&me.as_str()) {
-            return None;
-        }
-        Some((f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / tick)
-    })
+    let Ok(dir) = std::fs::read_dir("/proc") else { return 0.0 };
+    dir.flatten()
+        .filter_map(|e| {
+            let stat = std::fs::read_to_string(e.path().join("stat")).ok()?;
+            // pid (comm) state ppid ... utime stime: fields 14 and 15; comm may hold spaces.
+            let (comm, rest) = stat.split_once(" (")?.1.rsplit_once(") ")?;
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            if !pick(comm, f.get(1)?) {
+                return None;
+            }
+            Some((f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / tick)
+        })
+        .sum()
 }
 
-/// Samples the bridge's CPU time every 100 ms until `done`; the last sample (the bridge's
-/// total to within 100 ms of its CPU, a few ms at its 5% of a core).
-fn bridge_cpu(done: std::sync::Arc<std::sync::atomic::AtomicBool>) -> f64 {
-    let mut last = 0.0;
+/// Samples every 100 ms until `done` the CPU time of the bridge (our child) and of the
+/// browser (chromium and the processes it starts); the last samples, each within 100 ms of
+/// its total.
+fn sample_cpu(done: std::sync::Arc<std::sync::atomic::AtomicBool>) -> (f64, f64) {
+    let me = std::process::id().to_string();
+    let bridge = grains_protocol::Role::Bridge.binary();
+    let mut last = (0.0, 0.0);
     while !done.load(std::sync::atomic::Ordering::Relaxed) {
-        if let Some(s) = child_cpu(grains_protocol::Role::Bridge.binary()) {
-            last = s;
-        }
+        last = (
+            cpu_of(|comm, parent| comm == bridge && parent == me).max(last.0),
+            cpu_of(|comm, _| comm.starts_with("chrom")).max(last.1),
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
     last
@@ -172,9 +179,19 @@ fn children_cpu() -> f64 {
     secs(u.ru_utime) + secs(u.ru_stime)
 }
 
-/// One run of `kind`: stepping and whole wall time [s], the bridge's CPU time [s], and the
-/// CPU time of all the run's processes, the bridge's included [s].
-fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64, f64)> {
+/// What one run measured [s].
+struct Measured {
+    stepping: f64,
+    whole: f64,
+    bridge_cpu: f64,
+    browser_cpu: f64,
+    /// Of the run's child processes (the participants and the bridge; not the launcher, which
+    /// runs in this process).
+    run_cpu: f64,
+}
+
+/// One run of `kind`.
+fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<Measured> {
     let connect = free_endpoint()?;
     let http = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?;
     let bridge = (kind > 0).then(|| grains_bridge::config::BridgeArgs {
@@ -194,7 +211,7 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64, f64)> {
     let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let sampler = {
         let done = done.clone();
-        std::thread::spawn(move || bridge_cpu(done))
+        std::thread::spawn(move || sample_cpu(done))
     };
     let started = std::time::Instant::now();
     let cpu0 = children_cpu();
@@ -206,7 +223,7 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64, f64)> {
     // The run's processes have all been waited for; the browser and the client are not yet.
     let run_cpu = children_cpu() - cpu0;
     done.store(true, std::sync::atomic::Ordering::Relaxed);
-    let cpu = sampler.join().expect("the sampler thread");
+    let (bridge_cpu, browser_cpu) = sampler.join().expect("the sampler thread");
     if let Some(b) = browser {
         let mut chromium = b.join().expect("the browser thread")?;
         let _ = chromium.kill();
@@ -222,64 +239,69 @@ fn one(args: &BridgeArgs, kind: usize) -> anyhow::Result<(f64, f64, f64, f64)> {
         bail!("{}: the run did not complete: {}", KINDS[kind], outcome.message);
     }
     let _ = std::fs::remove_dir_all(&outcome.dir);
-    Ok((outcome.stepping.as_secs_f64(), whole, cpu, run_cpu))
+    Ok(Measured {
+        stepping: outcome.stepping.as_secs_f64(),
+        whole,
+        bridge_cpu,
+        browser_cpu,
+        run_cpu,
+    })
 }
 
 pub fn bench(args: &BridgeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut best = [(f64::INFINITY, f64::INFINITY); KINDS.len()];
-    // The bridge's and the whole run's CPU seconds of each run, for their medians.
-    let mut cpu: [Vec<f64>; KINDS.len()] = Default::default();
-    let mut run_cpu: [Vec<f64>; KINDS.len()] = Default::default();
+    // Every run of each kind, for the medians.
+    let mut runs: [Vec<Measured>; KINDS.len()] = Default::default();
     // Each run's stepping time over the run without a bridge of the same repeat (a pair run
-    // back to back sees the same load), for the median.
+    // back to back sees the same load).
     let mut paired: [Vec<f64>; KINDS.len()] = Default::default();
     for r in 0..args.repeats {
         let mut alone = f64::NAN;
         for (k, b) in best.iter_mut().enumerate() {
             tracing::info!("bench bridge: repeat {}/{}, {} ...", r + 1, args.repeats, KINDS[k]);
-            let (stepping, whole, c, rc) = one(args, k)?;
+            let m = one(args, k)?;
             if k == 0 {
-                alone = stepping;
+                alone = m.stepping;
             }
-            paired[k].push(stepping / alone);
-            *b = (b.0.min(stepping), b.1.min(whole));
-            cpu[k].push(c);
-            run_cpu[k].push(rc);
+            paired[k].push(m.stepping / alone);
+            *b = (b.0.min(m.stepping), b.1.min(m.whole));
+            runs[k].push(m);
         }
     }
-    let median = |v: &[f64]| {
-        let mut v = v.to_vec();
+    // The middle value, or the mean of the two middle ones.
+    let median = |v: Vec<f64>| {
+        let mut v = v;
         v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
+        let n = v.len();
+        0.5 * (v[(n - 1) / 2] + v[n / 2])
     };
+    let of = |k: usize, f: fn(&Measured) -> f64| median(runs[k].iter().map(f).collect());
     let mut out = format!(
         "machine: {} cores{}; {} for {} s, {} runs of each kind alternating, fastest of each; paired: the median over \
-         the repeats of the stepping time over that repeat's run without a bridge; CPU: medians (the run's: all its \
-         processes, the bridge's included)\n\n\
-         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge | paired | bridge CPU s | run CPU s | run CPU / no bridge |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         the repeats of the stepping time over that repeat's run without a bridge; CPU: medians (the run's: its child \
+         processes, the participants and the bridge)\n\n\
+         | run | stepping s | whole run s | stepping / no bridge | whole / no bridge | paired | bridge CPU s | browser CPU s | run CPU s | run CPU / no bridge |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         cores,
         if args.browser_idle { " (chromium under SCHED_IDLE)" } else { "" },
         args.scene.display(),
         args.duration,
         args.repeats,
     );
-    let run_cpu0 = median(&run_cpu[0]);
+    let run_cpu0 = of(0, |m| m.run_cpu);
     for (k, (s, w)) in best.iter().enumerate() {
-        let c = if k == 0 {
-            "—".to_string()
-        } else {
-            format!("{:.2}", median(&cpu[k]))
-        };
-        let rc = median(&run_cpu[k]);
+        let dash = |on: bool, v: f64| if on { format!("{v:.2}") } else { "—".to_string() };
+        let rc = of(k, |m| m.run_cpu);
         out.push_str(&format!(
-            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} | {:.3} | {c} | {rc:.2} | {:.3} |\n",
+            "| {} | {s:.3} | {w:.3} | {:.3} | {:.3} | {:.3} | {} | {} | {rc:.2} | {:.3} |\n",
             KINDS[k],
             s / best[0].0,
             w / best[0].1,
-            median(&paired[k]),
+            median(paired[k].clone()),
+            dash(k > 0, of(k, |m| m.bridge_cpu)),
+            dash(k == 3, of(k, |m| m.browser_cpu)),
             rc / run_cpu0
         ));
     }

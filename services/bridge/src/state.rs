@@ -4,7 +4,7 @@
 use grains_protocol::Role;
 use grains_protocol::wire::{StepHeader, Summary, ViewPoint};
 use serde_json::{Value, json};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::time::Instant;
 
 /// Gathers summaries until every participant of a step has reported.
@@ -13,8 +13,9 @@ pub struct Gather {
     partial: BTreeMap<u64, Vec<Summary>>,
     /// The last complete step, and when it completed.
     latest: Option<(Vec<Summary>, Instant)>,
-    /// (step, when) of the complete steps of the last few seconds, for steps/s.
-    recent: Vec<(u64, Instant)>,
+    /// (step, when) of the complete steps of the last few seconds, oldest first, for steps/s
+    /// (thousands at thousands of steps a second: dropped from the front, not scanned).
+    recent: VecDeque<(u64, Instant)>,
 }
 
 impl Gather {
@@ -23,7 +24,7 @@ impl Gather {
             roles: roles.to_vec(),
             partial: BTreeMap::new(),
             latest: None,
-            recent: Vec::new(),
+            recent: VecDeque::new(),
         }
     }
 
@@ -42,8 +43,14 @@ impl Gather {
         done.sort_by_key(|x| x.role);
         self.partial.retain(|&k, _| k > s.step);
         let now = Instant::now();
-        self.recent.push((s.step, now));
-        self.recent.retain(|(_, t)| now.duration_since(*t).as_secs_f64() < 5.0);
+        self.recent.push_back((s.step, now));
+        while self
+            .recent
+            .front()
+            .is_some_and(|(_, t)| now.duration_since(*t).as_secs_f64() >= 5.0)
+        {
+            self.recent.pop_front();
+        }
         self.latest = Some((done, now));
         true
     }
@@ -55,7 +62,7 @@ impl Gather {
     /// Macro-steps per second over the last few seconds up to now (so that it falls to 0
     /// while the run is paused; 0 before two steps are known).
     pub fn steps_per_second(&self) -> f64 {
-        match (self.recent.first(), self.recent.last()) {
+        match (self.recent.front(), self.recent.back()) {
             (Some((s0, t0)), Some((s1, t1))) if s1 > s0 => {
                 let span = t1.duration_since(*t0).as_secs_f64();
                 let idle = t1.elapsed().as_secs_f64();
