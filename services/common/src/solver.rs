@@ -68,6 +68,11 @@ pub trait Solver {
     fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()>;
     /// State after the last step.
     fn report(&self) -> SolverReport;
+    /// Whether [`Solver::view`] can say everything now (false: the view waits for the next
+    /// step; the DEM's after an epoch's exchange, whose contacts are not known yet).
+    fn view_ready(&self) -> bool {
+        true
+    }
     /// A view for remote viewers: at most `max` items (every k-th) into `out`; returns the
     /// total count.
     fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
@@ -272,7 +277,7 @@ impl<T: Transport> Viewer<T> {
 
     /// Publishes a view of `solver` after `window` if one is due and someone listens.
     pub fn offer<S: Solver>(&mut self, session: &Session<'_, T>, window: &StepWindow, solver: &S) -> anyhow::Result<()> {
-        if self.last.is_some_and(|t| t.elapsed() < VIEW_PERIOD) {
+        if self.last.is_some_and(|t| t.elapsed() < VIEW_PERIOD) || !solver.view_ready() {
             return Ok(());
         }
         self.last = Some(Instant::now());

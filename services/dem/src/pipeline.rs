@@ -158,6 +158,12 @@ impl<S: Space> DemPipeline<S> {
         self.sort_due = c.sort_due;
     }
 
+    /// Whether the contacts of the last step are known for the grains as they are now (false
+    /// after [`DemPipeline::invalidate`] until the next step).
+    pub fn contacts_known(&self) -> bool {
+        self.prepared
+    }
+
     /// Forgets the forces of the last step: call after adding, removing or moving grains
     /// outside of [`DemPipeline::step`].
     pub fn invalidate(&mut self) {
@@ -604,8 +610,7 @@ impl<S: Space> DemPipeline<S> {
     /// homogenization does; f the force on it), from the elastic forces of
     /// [`DemPipeline::contact_forces`] and [`DemPipeline::wall_contact_forces`]. A continuum
     /// over the same packing carries φ (the packing fraction) times the grains' mean. All NaN
-    /// when the grains changed since the last step (an epoch's exchange): their contacts are
-    /// not known until the next.
+    /// while [`DemPipeline::contacts_known`] is false.
     pub fn grain_pressures(&self, state: &DemState<S>) -> Vec<f64> {
         let g = &state.grains;
         if !self.prepared {

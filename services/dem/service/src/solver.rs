@@ -212,6 +212,11 @@ impl<S: Space> Solver for DemSolver<S> {
         self.after_step(window)
     }
 
+    /// A grain's pressure needs its contacts: not right after an epoch's exchange.
+    fn view_ready(&self) -> bool {
+        self.pipeline.contacts_known()
+    }
+
     fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
         let g = &self.state.grains;
         // Every contact is summed for the few grains shown: a view is made a few times a
