@@ -130,24 +130,22 @@ fn viewer_page(http: std::net::SocketAddr, idle_policy: bool) -> anyhow::Result<
         .context("starting chromium (Debian's chromium) for the viewer")
 }
 
-/// CPU seconds (user + system) of the processes alive now whose name and parent's pid pass
-/// `pick`, summed.
-fn cpu_of(pick: impl Fn(&str, &str) -> bool) -> f64 {
+/// (name, parent's pid, CPU seconds user + system) of every process alive now: one pass over
+/// `/proc` (the sampler shares the run's machine).
+fn processes_cpu() -> Vec<(String, String, f64)> {
     // SAFETY: sysconf has no preconditions.
     let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
-    let Ok(dir) = std::fs::read_dir("/proc") else { return 0.0 };
+    let Ok(dir) = std::fs::read_dir("/proc") else { return Vec::new() };
     dir.flatten()
         .filter_map(|e| {
             let stat = std::fs::read_to_string(e.path().join("stat")).ok()?;
             // pid (comm) state ppid ... utime stime: fields 14 and 15; comm may hold spaces.
             let (comm, rest) = stat.split_once(" (")?.1.rsplit_once(") ")?;
             let f: Vec<&str> = rest.split_whitespace().collect();
-            if !pick(comm, f.get(1)?) {
-                return None;
-            }
-            Some((f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / tick)
+            let cpu = (f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?) / tick;
+            Some((comm.to_string(), f.get(1)?.to_string(), cpu))
         })
-        .sum()
+        .collect()
 }
 
 /// Samples every 100 ms until `done` the CPU time of the bridge (our child) and of the
@@ -156,11 +154,13 @@ fn cpu_of(pick: impl Fn(&str, &str) -> bool) -> f64 {
 fn sample_cpu(done: std::sync::Arc<std::sync::atomic::AtomicBool>) -> (f64, f64) {
     let me = std::process::id().to_string();
     let bridge = grains_protocol::Role::Bridge.binary();
-    let mut last = (0.0, 0.0);
+    let mut last = (0.0f64, 0.0f64);
     while !done.load(std::sync::atomic::Ordering::Relaxed) {
+        let all = processes_cpu();
+        let sum = |pick: &dyn Fn(&str, &str) -> bool| all.iter().filter(|(c, p, _)| pick(c, p)).map(|(_, _, cpu)| cpu).sum::<f64>();
         last = (
-            cpu_of(|comm, parent| comm == bridge && parent == me).max(last.0),
-            cpu_of(|comm, _| comm.starts_with("chrom")).max(last.1),
+            sum(&|comm, parent| comm == bridge && parent == me).max(last.0),
+            sum(&|comm, _| comm.starts_with("chrom")).max(last.1),
         );
         std::thread::sleep(Duration::from_millis(100));
     }
