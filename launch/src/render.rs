@@ -54,18 +54,28 @@ pub struct Scene2 {
     pub grains: Vec<([f64; 2], f64, f64)>,
     /// Points: centre [m], half their spacing [m], speed [m/s].
     pub points: Vec<([f64; 2], f64, f64)>,
+    /// Rigid bodies: outline [m], speed of the centre of mass [m/s].
+    pub bodies: Vec<(Vec<[f64; 2]>, f64)>,
 }
 
 impl Scene2 {
     /// The fastest material's speed [m/s].
     pub fn fastest(&self) -> f64 {
-        self.grains.iter().chain(&self.points).map(|m| m.2).fold(0.0, f64::max)
+        let bodies = self.bodies.iter().map(|b| b.1);
+        self.grains
+            .iter()
+            .chain(&self.points)
+            .map(|m| m.2)
+            .chain(bodies)
+            .fold(0.0, f64::max)
     }
 }
 
 const BACKGROUND: RGBColor = RGBColor(255, 255, 255);
 const SAND: RGBColor = RGBColor(194, 138, 64);
 const CONTINUUM: RGBColor = RGBColor(70, 130, 200);
+/// Rigid bodies: grey stone, outlined.
+const BODY: RGBColor = RGBColor(140, 140, 140);
 
 /// `grains render`: reads the frames and writes the pictures (and the film); returns what it
 /// wrote.
@@ -165,7 +175,7 @@ pub fn frame(run: &Path, step: u64, view: Option<([f64; 2], [f64; 2])>) -> anyho
         let file = frames.join(format!("{name}_{step:08}.vtu"));
         if file.exists() { Frame::read(&file).map(Some) } else { Ok(None) }
     };
-    let (grains, points) = (read("grains")?, read("points")?);
+    let (grains, points, bodies) = (read("grains")?, read("points")?, read("bodies")?);
     if grains.is_none() && points.is_none() {
         bail!(
             "{}: no frame of step {step} (frames are written every output.frames_every steps)",
@@ -180,6 +190,7 @@ pub fn frame(run: &Path, step: u64, view: Option<([f64; 2], [f64; 2])>) -> anyho
         max,
         grains: grains.map_or(Ok(Vec::new()), |f| material(&f, None))?,
         points: points.map_or(Ok(Vec::new()), |f| material(&f, Some(point_half)))?,
+        bodies: bodies.map_or(Ok(Vec::new()), |f| outlines(&f))?,
     })
 }
 
@@ -292,6 +303,19 @@ fn material(f: &Frame, half: Option<f64>) -> anyhow::Result<Vec<([f64; 2], f64, 
         .collect())
 }
 
+/// The rigid bodies of a frame of polygons: each cell's outline and its speed.
+fn outlines(f: &Frame) -> anyhow::Result<Vec<(Vec<[f64; 2]>, f64)>> {
+    let v = f.array("velocity").context("a frame of bodies without a velocity array")?;
+    let mut start = 0;
+    let mut out = Vec::new();
+    for (k, &end) in f.cell_ends.iter().enumerate() {
+        let outline = f.points.get(start..end).context("a cell beyond the frame's points")?;
+        out.push((outline.iter().map(|p| [p[0], p[1]]).collect(), v[3 * k].hypot(v[3 * k + 1])));
+        start = end;
+    }
+    Ok(out)
+}
+
 /// Picture size for `width` pixels across the view.
 pub fn size(view: &Scene2, width: u32) -> (u32, u32) {
     let aspect = (view.max[1] - view.min[1]) / (view.max[0] - view.min[0]);
@@ -333,6 +357,14 @@ pub fn draw<DB: DrawingBackend>(
         let r = ((radius * scale).round() as i32).max(1);
         root.draw(&Circle::new(at(*x), r, paint(SAND, *speed).filled())).map_err(fail)?;
     }
+    for (outline, speed) in &view.bodies {
+        let corners: Vec<(i32, i32)> = outline.iter().map(|&p| at(p)).collect();
+        root.draw(&Polygon::new(corners.clone(), paint(BODY, *speed).filled()))
+            .map_err(fail)?;
+        let mut edge = corners;
+        edge.push(edge[0]);
+        root.draw(&PathElement::new(edge, BLACK.stroke_width(1))).map_err(fail)?;
+    }
     root.present().map_err(fail)?;
     Ok(())
 }
@@ -363,6 +395,7 @@ mod tests {
             max: [0.1, 0.075],
             grains: vec![(x, 0.002, 0.0)],
             points: Vec::new(),
+            bodies: Vec::new(),
         };
         let rows = vec![vec![("a".to_string(), view([0.025, 0.05])), ("b".to_string(), view([0.07, 0.02]))]];
         let (w, h) = panels_size(&rows, 1000).unwrap();
@@ -398,6 +431,7 @@ mod tests {
             max: [0.1, 0.075],
             grains: vec![([0.025, 0.05], 0.002, 0.0), ([0.07, 0.02], 0.001, 0.0)],
             points: Vec::new(),
+            bodies: Vec::new(),
         };
         let (w, h) = size(&view, 1000);
         assert_eq!((w, h), (1000, 750));
@@ -449,5 +483,37 @@ mod tests {
             std::f64::consts::PI * (21.0f64.powi(2) + 11.0f64.powi(2)),
         );
         assert!((lo..=hi).contains(&total), "{total} px painted, two disks are {lo:.0} to {hi:.0}");
+    }
+
+    /// A rigid body's outline, a 20 mm square from (0.04, 0.02) at 1000 px across 0.1 m, is
+    /// painted grey over its 200 × 200 px, not outside it.
+    #[test]
+    fn a_rigid_body_draws_as_its_outline() {
+        let view = Scene2 {
+            min: [0.0, 0.0],
+            max: [0.1, 0.075],
+            grains: Vec::new(),
+            points: Vec::new(),
+            bodies: vec![(vec![[0.04, 0.02], [0.06, 0.02], [0.06, 0.04], [0.04, 0.04]], 0.0)],
+        };
+        let (w, h) = size(&view, 1000);
+        let mut px = vec![0u8; (w * h * 3) as usize];
+        draw(
+            &view,
+            Colour::Model,
+            0.0,
+            &BitMapBackend::with_buffer(&mut px, (w, h)).into_drawing_area(),
+        )
+        .unwrap();
+        let colour = |x: u32, y: u32| {
+            let k = 3 * (y * w + x) as usize;
+            (px[k], px[k + 1], px[k + 2])
+        };
+        // Rows 350..550 from the top (y from 0.04 down to 0.02), columns 400..600.
+        assert_eq!(colour(500, 450), (BODY.0, BODY.1, BODY.2));
+        assert_eq!(colour(405, 355), (BODY.0, BODY.1, BODY.2));
+        for (x, y) in [(390, 450), (610, 450), (500, 340), (500, 560)] {
+            assert_eq!(colour(x, y), (BACKGROUND.0, BACKGROUND.1, BACKGROUND.2), "({x}, {y})");
+        }
     }
 }

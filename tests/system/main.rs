@@ -672,6 +672,41 @@ fn a_dem_scene_starts_only_the_dem_and_threads_give_the_same_physics() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// Rigid bodies through a real run (`tests/scenes/rigid_floor_2d.toml`): grains and a free
+/// square settle on a fixed slab between frictionless walls; at rest the slab carries the
+/// weight of everything above it (statics: the square's m g plus the grains' Σ m g, to 1%),
+/// the square rests, and the bodies' outlines are frames of their own (`frames/bodies.pvd`).
+#[test]
+fn a_fixed_rigid_floor_carries_the_weight_of_the_grains_and_the_free_body_on_it() {
+    let _machine = machine();
+    let out = out_dir("rigid");
+    let (status, err) = run_to_end(&["run", "tests/scenes/rigid_floor_2d.toml", "--out", out.to_str().unwrap(), "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    let listed = grains_service::vtu::collection(&dir.join("frames/bodies.pvd")).unwrap();
+    let last = grains_service::vtu::Frame::read(&listed.last().unwrap().1).unwrap();
+    let grains = grains_service::vtu::Frame::read(&dir.join(format!("frames/grains_{:08}.vtu", 5000))).unwrap();
+    let (force, velocity) = (last.array("force").unwrap(), last.array("velocity").unwrap());
+    assert_eq!(force.len(), 6, "two bodies, three components each");
+    let grain_weight: f64 = grains.array("mass").unwrap().iter().sum::<f64>() * 9.81;
+    let scene = grains_protocol::scene::load(&dir.join("scene.toml")).unwrap();
+    let square: Vec<glam::DVec2> = scene.rigids[1].vertices.iter().map(|&[x, y]| glam::DVec2::new(x, y)).collect();
+    let square_weight = grains_dem::bodies::mass_properties(&square, scene.rigids[1].radius).area * 2530.0 * 9.81;
+    let total = grain_weight + square_weight;
+    assert!(
+        (-force[1] - total).abs() < 0.01 * total,
+        "the slab carries {} N, the weight above it is {total} N (grains {grain_weight}, square {square_weight})",
+        -force[1]
+    );
+    assert!(
+        (force[4] - square_weight).abs() < 0.01 * square_weight,
+        "the square's contacts {} N vs its weight {square_weight} N",
+        force[4]
+    );
+    assert!(velocity[3].hypot(velocity[4]) < 1e-3, "the square rests: {velocity:?}");
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 #[test]
 fn a_time_step_above_the_stable_limit_is_refused_before_the_run() {
     let out = out_dir("unstable");

@@ -171,6 +171,7 @@ fn state_from<S: Space>(data: &DataFile, flow: bool) -> DemState<S> {
     }
     let mut st = DemState::<S> {
         grains: Grains::default(),
+        bodies: Vec::new(),
         walls: Vec::new(),
         params: DemParams {
             materials: vec![params(dim)],

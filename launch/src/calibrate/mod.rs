@@ -188,6 +188,7 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
     let sites = lattice_in_box::<D2>([0.0; 3], [width, height, 0.0], spacing, 1.01 * r_max, 0.01 * dem.radius, &mut rng);
     let mut state = DemState::<D2> {
         grains: Grains::default(),
+        bodies: Vec::new(),
         walls: vec![
             Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([1.0, 0.0, 0.0]), 0.0),
             Wall::plane(D2::from_array([width, 0.0, 0.0]), D2::from_array([-1.0, 0.0, 0.0]), 0.0),

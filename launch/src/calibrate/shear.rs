@@ -234,6 +234,7 @@ pub fn simple_shear(
     let height = rows * spacing * 3f64.sqrt() / 2.0 + 2.0 * r_max;
     let mut state = DemState::<D2> {
         grains: Grains::default(),
+        bodies: Vec::new(),
         walls: Vec::new(),
         params: DemParams {
             materials: vec![params],

@@ -21,6 +21,7 @@ const RESTITUTION_TOLERANCE: f64 = 0.02;
 fn impact(p: ContactParams, r: f64, density: f64) -> f64 {
     let mut st = DemState::<D2> {
         grains: Grains::default(),
+        bodies: Vec::new(),
         walls: Vec::new(),
         params: DemParams {
             materials: vec![p],

@@ -22,6 +22,7 @@ mod oracle;
 mod output;
 mod overrides;
 pub mod raw;
+mod rigid;
 mod run;
 mod steps;
 mod synthetic;
@@ -39,6 +40,7 @@ pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
 pub use oracle::{Oracle, OracleKind};
 pub use output::Output;
 pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};
+pub use rigid::{Rigid, RigidMotion, check_polygon};
 pub use run::Dimension;
 pub use steps::with_resolved_steps;
 pub use synthetic::{Synthetic, SyntheticContent};
@@ -72,6 +74,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub bodies: Vec<Body>,
     pub walls: Vec<Wall>,
+    /// `[[rigid]]`: rigid spheropolygons (2D), run by the DEM.
+    pub rigids: Vec<Rigid>,
     pub coupling: Coupling,
     pub mpm: MpmSettings,
     pub oracle: Option<Oracle>,
@@ -89,7 +93,7 @@ impl Scene {
             return s.participants.clone();
         }
         let has = |m: Model| self.bodies.iter().any(|b| b.model == m);
-        let dem = has(Model::Dem) || has(Model::Hybrid);
+        let dem = has(Model::Dem) || has(Model::Hybrid) || !self.rigids.is_empty();
         let mpm = has(Model::Mpm) || has(Model::Hybrid);
         let mut out = Vec::new();
         if dem {
@@ -274,20 +278,30 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
     let materials = materials::validate(ctx, &raw.material)?;
     let bodies = bodies::validate(ctx, dim, &raw.body, &materials)?;
     let walls = walls::validate(ctx, dim, &raw.wall)?;
+    let rigids = rigid::validate(ctx, dim, &raw.rigid, &materials)?;
     let coupling = coupling::validate(ctx, raw.coupling.as_ref(), domain.cell_size, run.dt)?;
     let mpm = mpm::validate(ctx, raw.mpm.as_ref())?;
     let oracle = oracle::validate(ctx, raw.oracle.as_ref())?;
     let output = output::validate(raw.output.as_ref());
     let bridge = bridge::validate(ctx, raw.bridge.as_ref())?;
     let synthetic = synthetic::validate(ctx, raw.synthetic.as_ref())?;
-    if synthetic.is_none() && bodies.is_empty() {
+    if synthetic.is_none() && bodies.is_empty() && rigids.is_empty() {
         return Err(ctx.err(
             None,
             Some("body"),
-            "the scene has no [[body]] of material (and is not a [synthetic] test scene): nothing to simulate".into(),
+            "the scene has no [[body]] of material or [[rigid]] body (and is not a [synthetic] test scene): nothing to simulate".into(),
         ));
     }
-    if synthetic.is_some() && !bodies.is_empty() {
+    if !rigids.is_empty() && bodies.iter().any(|b| b.model != Model::Dem) {
+        return Err(ctx.err(
+            None,
+            Some("rigid"),
+            "rigid bodies meet grains and walls only: their contact with a continuum (Jiang 2020 §4) is not implemented yet, \
+             so a scene with [[rigid]] bodies takes no \"mpm\" or \"hybrid\" [[body]]"
+                .into(),
+        ));
+    }
+    if synthetic.is_some() && !(bodies.is_empty() && rigids.is_empty()) {
         return Err(ctx.err(
             None,
             Some("synthetic"),
@@ -308,6 +322,7 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         materials,
         bodies,
         walls,
+        rigids,
         coupling,
         mpm,
         oracle,

@@ -16,6 +16,8 @@ pub struct RawScene {
     pub body: Vec<RawBody>,
     #[serde(default)]
     pub wall: Vec<RawWall>,
+    #[serde(default)]
+    pub rigid: Vec<RawRigid>,
     pub coupling: Option<RawCoupling>,
     pub mpm: Option<RawMpm>,
     pub oracle: Option<RawOracle>,
@@ -127,6 +129,17 @@ pub struct RawWall {
     pub velocity: Option<Spanned<Vec<f64>>>,
     pub spin: Option<Spanned<f64>>,
     pub sticky: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawRigid {
+    pub material: Spanned<String>,
+    pub vertices: Spanned<Vec<Vec<f64>>>,
+    pub radius: Option<Spanned<f64>>,
+    pub motion: Option<Spanned<String>>,
+    pub velocity: Option<Spanned<Vec<f64>>>,
+    pub spin: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]

@@ -25,6 +25,14 @@ pub struct Field<'a> {
     pub values: Values<'a>,
 }
 
+/// The cells of a piece: their points' indices, where each cell ends, the VTK cell type
+/// (1 vertex, 7 polygon).
+struct Cells {
+    connectivity: Vec<i64>,
+    offsets: Vec<i64>,
+    kind: u8,
+}
+
 pub struct PointFrames {
     dir: PathBuf,
     name: String,
@@ -85,19 +93,67 @@ impl PointFrames {
     }
 
     pub fn write(&mut self, step: u64, time: f64, positions: &[[f64; 3]], fields: &[Field]) -> std::io::Result<PathBuf> {
-        let n = positions.len();
+        let n = positions.len() as i64;
+        let cells = Cells {
+            connectivity: (0..n).collect(),
+            offsets: (1..=n).collect(),
+            kind: 1,
+        };
+        self.write_piece(step, time, positions, &cells, "PointData", fields)
+    }
+
+    /// A frame of polygons (rigid bodies' outlines), one cell each (VTK_POLYGON), `fields`
+    /// per cell.
+    pub fn write_polygons(&mut self, step: u64, time: f64, outlines: &[Vec<[f64; 3]>], fields: &[Field]) -> std::io::Result<PathBuf> {
+        let points: Vec<[f64; 3]> = outlines.iter().flatten().copied().collect();
+        let mut offsets = Vec::with_capacity(outlines.len());
+        let mut end = 0;
+        for o in outlines {
+            end += o.len() as i64;
+            offsets.push(end);
+        }
+        let cells = Cells {
+            connectivity: (0..end).collect(),
+            offsets,
+            kind: 7,
+        };
+        self.write_piece(step, time, &points, &cells, "CellData", fields)
+    }
+
+    fn write_piece(
+        &mut self,
+        step: u64,
+        time: f64,
+        points: &[[f64; 3]],
+        cells: &Cells,
+        data: &str,
+        fields: &[Field],
+    ) -> std::io::Result<PathBuf> {
+        let (n, m) = (points.len(), cells.offsets.len());
         let mut s = String::with_capacity(40 * n * (2 + fields.len()) + 1024);
         s.push_str(
             "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n",
         );
-        let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">");
+        let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{m}\">");
         s.push_str("<Points>\n");
-        array(&mut s, "Float64", None, 3, positions.iter().flatten().flat_map(|x| x.to_le_bytes()));
+        array(&mut s, "Float64", None, 3, points.iter().flatten().flat_map(|x| x.to_le_bytes()));
         s.push_str("</Points>\n<Cells>\n");
-        array(&mut s, "Int64", Some("connectivity"), 1, (0..n as i64).flat_map(i64::to_le_bytes));
-        array(&mut s, "Int64", Some("offsets"), 1, (1..=n as i64).flat_map(i64::to_le_bytes));
-        array(&mut s, "UInt8", Some("types"), 1, std::iter::repeat_n(1u8, n));
-        s.push_str("</Cells>\n<PointData>\n");
+        array(
+            &mut s,
+            "Int64",
+            Some("connectivity"),
+            1,
+            cells.connectivity.iter().flat_map(|i| i.to_le_bytes()),
+        );
+        array(
+            &mut s,
+            "Int64",
+            Some("offsets"),
+            1,
+            cells.offsets.iter().flat_map(|i| i.to_le_bytes()),
+        );
+        array(&mut s, "UInt8", Some("types"), 1, std::iter::repeat_n(cells.kind, m));
+        let _ = writeln!(s, "</Cells>\n<{data}>");
         for f in fields {
             let (name, c) = (Some(f.name), f.components);
             match f.values {
@@ -106,7 +162,7 @@ impl PointFrames {
                 Values::I32(v) => array(&mut s, "Int32", name, c, v.iter().flat_map(|x| x.to_le_bytes())),
             }
         }
-        s.push_str("</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+        let _ = writeln!(s, "</{data}>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>");
 
         let file = format!("{}_{step:08}.vtu", self.name);
         let path = self.dir.join(&file);
@@ -186,12 +242,14 @@ fn base64_decode(text: &str) -> anyhow::Result<Vec<u8>> {
     Ok(out)
 }
 
-/// A frame read back: the points and every point-data array (values as numbers, point after
-/// point, `components` per point).
+/// A frame read back: the points, where each cell's points end (a frame of polygons: one
+/// outline per cell), and every point- or cell-data array (values as numbers, item after
+/// item, `components` per item).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Frame {
     pub points: Vec<[f64; 3]>,
     pub arrays: Vec<(String, usize, Vec<f64>)>,
+    pub cell_ends: Vec<usize>,
 }
 
 impl Frame {
@@ -224,22 +282,38 @@ impl Frame {
             .find(|c| c.has_tag_name("DataArray"))
             .context("<Points> without a DataArray")?;
         let flat = values(&xyz, n * 3, header)?;
+        let cells: usize = piece
+            .attribute("NumberOfCells")
+            .unwrap_or("0")
+            .parse()
+            .context("NumberOfCells is not a count")?;
+        let offsets = piece
+            .children()
+            .find(|c| c.has_tag_name("Cells"))
+            .and_then(|c| c.children().find(|a| a.attribute("Name") == Some("offsets")));
         let mut frame = Frame {
             points: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
             arrays: Vec::new(),
+            cell_ends: match offsets {
+                Some(a) => values(&a, cells, header)?.into_iter().map(|o| o as usize).collect(),
+                None => Vec::new(),
+            },
         };
-        if let Some(data) = piece.children().find(|c| c.has_tag_name("PointData")) {
+        for (tag, count) in [("PointData", n), ("CellData", cells)] {
+            let Some(data) = piece.children().find(|c| c.has_tag_name(tag)) else {
+                continue;
+            };
             for a in data.children().filter(|c| c.has_tag_name("DataArray")) {
-                let name = a.attribute("Name").context("a point-data array without a Name")?;
+                let name = a.attribute("Name").context("a data array without a Name")?;
                 let components: usize = a.attribute("NumberOfComponents").unwrap_or("1").parse()?;
-                let v = values(&a, n * components, header).with_context(|| format!("array {name}"))?;
+                let v = values(&a, count * components, header).with_context(|| format!("array {name}"))?;
                 frame.arrays.push((name.to_string(), components, v));
             }
         }
         Ok(frame)
     }
 
-    /// Point-data array `name`, if the frame has it.
+    /// Data array `name` (per point, or per cell in a frame of polygons), if the frame has it.
     pub fn array(&self, name: &str) -> Option<&[f64]> {
         self.arrays.iter().find(|(n, _, _)| n == name).map(|(_, _, v)| v.as_slice())
     }

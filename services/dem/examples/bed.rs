@@ -26,6 +26,7 @@ fn main() {
     let mut st = DemState::<D3> {
         grains: Grains::default(),
         walls: vec![Wall::plane(DVec3::ZERO, DVec3::Z, 0.5)],
+        bodies: Vec::new(),
         params: DemParams {
             materials: vec![p],
             gravity: DVec3::new(0.0, 0.0, -9.81),

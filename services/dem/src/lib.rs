@@ -3,6 +3,8 @@
 //! - [`space`] (from `grains-grid`): the dimension as a type ([`space::D2`], [`space::D3`]) so
 //!   2D and 3D share kernels;
 //! - [`state`]: plain data — [`state::Grains`] (structure of arrays), walls, domain, parameters;
+//! - [`bodies`]: rigid spheropolygons (2D, Jiang 2020 §3): shapes, mass properties,
+//!   vertex–edge contacts with each other, the grains and the walls;
 //! - [`contact`]: the contact law kernels (normal spring–dashpot from restitution, tangential
 //!   anchor spring with the Coulomb cap, cohesion);
 //! - [`neighbors`]: cell lists → Verlet list with a skin, history carried by grain ids;
@@ -15,6 +17,7 @@
 //!
 //! No I/O, no transport, no wall clock: the service wraps it.
 
+pub mod bodies;
 pub mod contact;
 pub mod coupled;
 pub mod coupling;

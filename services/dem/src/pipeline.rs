@@ -15,6 +15,7 @@
 //! The pipeline owns scratch only (forces, the neighbour list, the thread pool); the state is
 //! passed in.
 
+use crate::bodies::{self, BodyContacts, GrainView};
 use crate::contact::{ContactParams, Damping, contact_force, reduced_mass};
 use crate::neighbors::{NeighborList, PairSlot, periods, separation, wall_gap, wall_geometry};
 use crate::space::{Space, Vector};
@@ -69,6 +70,10 @@ pub struct DemPipeline<S: Space> {
     /// next step of [`DemPipeline::run`]).
     hold_order: bool,
     sort_due: bool,
+    /// The rigid bodies' contact histories ([`crate::bodies`]).
+    bodies: BodyContacts,
+    /// Per grain, the force of the bodies on it at the last evaluation (empty without bodies).
+    from_bodies: Vec<GrainForce<S>>,
 }
 
 /// See [`DemPipeline::carry`]. (The per-range buffers are not in it: every evaluation
@@ -83,6 +88,7 @@ pub struct Carry<S: Space> {
     prepared: bool,
     resync: bool,
     sort_due: bool,
+    bodies: BodyContacts,
 }
 
 /// Error building a pipeline (thread pool).
@@ -130,6 +136,8 @@ impl<S: Space> DemPipeline<S> {
             resync: false,
             hold_order: false,
             sort_due: false,
+            bodies: BodyContacts::default(),
+            from_bodies: Vec::new(),
         })
     }
 
@@ -145,6 +153,7 @@ impl<S: Space> DemPipeline<S> {
             prepared: self.prepared,
             resync: self.resync,
             sort_due: self.sort_due,
+            bodies: self.bodies.clone(),
         }
     }
 
@@ -156,6 +165,7 @@ impl<S: Space> DemPipeline<S> {
         self.prepared = c.prepared;
         self.resync = c.resync;
         self.sort_due = c.sort_due;
+        self.bodies = c.bodies;
     }
 
     /// Whether the contacts of the last step are known for the grains as they are now (false
@@ -226,7 +236,9 @@ impl<S: Space> DemPipeline<S> {
             self.neighbors.build(state);
         }
         self.pair_forces(state, dt);
+        self.body_forces(state, dt);
         self.finish_forces(state, 0.5 * dt);
+        bodies::half_kick(&mut state.bodies, to_plane::<S>(state.params.gravity), 0.5 * dt);
         state.time += dt;
     }
 
@@ -241,6 +253,7 @@ impl<S: Space> DemPipeline<S> {
             self.refresh_hot(state);
             self.neighbors.build(state);
             self.pair_forces(state, 0.0);
+            self.body_forces(state, 0.0);
             self.finish_forces(state, 0.0);
             self.prepared = true;
             self.resync = false;
@@ -256,6 +269,7 @@ impl<S: Space> DemPipeline<S> {
                 self.neighbors.build(state);
             }
             self.pair_forces(state, 0.0);
+            self.body_forces(state, 0.0);
             self.finish_forces(state, 0.0);
             self.resync = false;
         }
@@ -349,7 +363,46 @@ impl<S: Space> DemPipeline<S> {
                 }
             }
         }
+        bodies::kick_drift(&mut state.bodies, to_plane::<S>(gravity), dt);
         moved
+    }
+
+    /// The rigid bodies' contacts ([`crate::bodies::forces`]) at the current positions: their
+    /// force on each grain goes to `from_bodies`, which [`DemPipeline::finish_forces`] adds.
+    fn body_forces(&mut self, state: &mut DemState<S>, dt: f64) {
+        self.from_bodies.clear();
+        if state.bodies.is_empty() {
+            return;
+        }
+        assert_eq!(S::DIM, 2, "rigid bodies are 2D");
+        let g = &state.grains;
+        // Only the grains within some body's reach: the few bodies' scratch stays small.
+        let reach: Vec<(glam::DVec2, f64)> = state.bodies.iter().map(|b| (b.x, b.reach())).collect();
+        let near = |x: glam::DVec2, r: f64| reach.iter().any(|&(c, a)| (x - c).length_squared() <= (a + r) * (a + r));
+        let view: Vec<GrainView> = (0..g.len())
+            .filter(|&i| near(to_plane::<S>(g.x[i]), g.radius[i]))
+            .map(|i| GrainView {
+                index: i,
+                x: to_plane::<S>(g.x[i]),
+                v: to_plane::<S>(g.v[i]),
+                omega: S::ang_array(g.omega[i])[2],
+                radius: g.radius[i],
+                inv_mass: if g.frozen[i] { 0.0 } else { 1.0 / (g.mass[i] * g.scale[i]) },
+                scale: g.scale[i],
+                id: g.id[i],
+            })
+            .collect();
+        let walls: Vec<crate::state::Wall<crate::space::D2>> = state.walls.iter().map(crate::state::Wall::in_plane::<S>).collect();
+        let touched = bodies::forces(&mut state.bodies, &view, &walls, &state.params.materials, dt, &mut self.bodies);
+        if !touched.is_empty() {
+            self.from_bodies = vec![GrainForce::default(); g.len()];
+            for (i, f, t) in touched {
+                let e = &mut self.from_bodies[i];
+                e.force += S::from_array([f.x, f.y, 0.0]);
+                e.torque += S::ang_from_array([0.0, 0.0, t]);
+                e.contacts += 1;
+            }
+        }
     }
 
     /// Grain–grain contact forces at the current positions, added range by range into the
@@ -462,6 +515,7 @@ impl<S: Space> DemPipeline<S> {
         }
 
         let nb = &self.neighbors;
+        let from_bodies = &self.from_bodies;
         let (partial, direct): (&[Window<S>], bool) = if self.direct { (&[], true) } else { (&self.partial, false) };
         let gravity = state.params.gravity;
         let g = &mut state.grains;
@@ -494,6 +548,11 @@ impl<S: Space> DemPipeline<S> {
                         total.contacts += 1;
                     }
                 }
+                if let Some(b) = from_bodies.get(i) {
+                    total.force += b.force;
+                    total.torque += b.torque;
+                    total.contacts += b.contacts;
+                }
                 *out = total;
                 if frozen || h == 0.0 {
                     return;
@@ -512,7 +571,7 @@ impl<S: Space> DemPipeline<S> {
         }
     }
 
-    /// Kinetic energy (translation + rotation) [J] with scaled masses.
+    /// Kinetic energy (translation + rotation) [J] with scaled masses, free bodies included.
     pub fn kinetic_energy(state: &DemState<S>) -> f64 {
         let g = &state.grains;
         (0..g.len())
@@ -520,7 +579,8 @@ impl<S: Space> DemPipeline<S> {
                 let m = g.mass[i] * g.scale[i];
                 0.5 * m * g.v[i].length_squared() + 0.5 * S::INERTIA_FACTOR * m * g.radius[i].powi(2) * g.omega[i].length_squared()
             })
-            .sum()
+            .sum::<f64>()
+            + free_bodies(state).map(bodies::Body::kinetic_energy).sum::<f64>()
     }
 
     /// Elastic energy stored in the normal and tangential springs of active contacts [J].
@@ -633,18 +693,21 @@ impl<S: Space> DemPipeline<S> {
             .collect()
     }
 
-    /// Gravitational potential energy −Σ m g·x [J].
+    /// Gravitational potential energy −Σ m g·x [J], free bodies included.
     pub fn potential_energy(state: &DemState<S>) -> f64 {
         let g = &state.grains;
+        let gravity = to_plane::<S>(state.params.gravity);
         (0..g.len())
             .map(|i| -g.mass[i] * g.scale[i] * state.params.gravity.dot(g.x[i]))
-            .sum()
+            .sum::<f64>()
+            - free_bodies(state).map(|b| b.mass * gravity.dot(b.x)).sum::<f64>()
     }
 
-    /// Total linear momentum [kg m/s].
+    /// Total linear momentum [kg m/s], free bodies included.
     pub fn momentum(state: &DemState<S>) -> S::V {
         let g = &state.grains;
-        (0..g.len()).fold(S::V::default(), |p, i| p + g.v[i] * (g.mass[i] * g.scale[i]))
+        let p = (0..g.len()).fold(S::V::default(), |p, i| p + g.v[i] * (g.mass[i] * g.scale[i]));
+        free_bodies(state).fold(p, |p, b| p + S::from_array([b.v.x * b.mass, b.v.y * b.mass, 0.0]))
     }
 
     /// The id of the first grain whose position or velocity is not finite.
@@ -654,6 +717,17 @@ impl<S: Space> DemPipeline<S> {
             .find(|&i| !g.x[i].is_finite() || !g.v[i].is_finite() || !g.omega[i].is_finite())
             .map(|i| g.id[i])
     }
+}
+
+/// A vector's in-plane part (the bodies are 2D).
+fn to_plane<S: Space>(v: S::V) -> glam::DVec2 {
+    let a = S::to_array(v);
+    glam::DVec2::new(a[0], a[1])
+}
+
+/// The bodies that move by their forces (the others are boundaries: not in the energies).
+fn free_bodies<S: Space>(state: &DemState<S>) -> impl Iterator<Item = &bodies::Body> {
+    state.bodies.iter().filter(|b| b.motion == bodies::Motion::Free)
 }
 
 /// v += h (F + F_ext)/m' + h g, ω += h τ / I' with I' = (I/(m r²)) m' r² (m' scaled mass).

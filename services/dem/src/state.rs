@@ -146,6 +146,29 @@ impl<S: Space> Wall<S> {
         }
     }
 
+    /// The same wall in the x–y plane (for the 2D bodies).
+    pub fn in_plane<T: Space>(w: &Wall<T>) -> Wall<S> {
+        let p = |v: T::V| {
+            let a = T::to_array(v);
+            S::from_array([a[0], a[1], 0.0])
+        };
+        Wall {
+            shape: match w.shape {
+                WallShape::Plane { point, normal } => WallShape::Plane {
+                    point: p(point),
+                    normal: p(normal),
+                },
+                WallShape::Drum { center, radius } => WallShape::Drum { center: p(center), radius },
+                WallShape::Segment { a, b } => WallShape::Segment { a: p(a), b: p(b) },
+            },
+            velocity: p(w.velocity),
+            spin: w.spin,
+            friction: w.friction,
+            load: p(w.load),
+            id: w.id,
+        }
+    }
+
     pub fn drum(center: S::V, radius: f64, friction: f64) -> Self {
         Wall {
             shape: WallShape::Drum { center, radius },
@@ -196,6 +219,8 @@ pub struct DemParams<S: Space> {
 pub struct DemState<S: Space> {
     pub grains: Grains<S>,
     pub walls: Vec<Wall<S>>,
+    /// Rigid spheropolygons (2D only; empty in 3D).
+    pub bodies: Vec<crate::bodies::Body>,
     pub params: DemParams<S>,
     /// Simulated time [s].
     pub time: f64,

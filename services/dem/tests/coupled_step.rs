@@ -36,6 +36,7 @@ fn bed() -> DemState<D2> {
     let mut st = DemState {
         grains: Grains::default(),
         walls: Vec::new(),
+        bodies: Vec::new(),
         params: DemParams {
             materials: vec![p],
             gravity: DVec2::new(0.0, -9.81),

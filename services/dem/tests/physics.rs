@@ -26,6 +26,7 @@ fn state<S: Space>(p: ContactParams, gravity: [f64; 3]) -> DemState<S> {
     DemState {
         grains: Grains::default(),
         walls: Vec::new(),
+        bodies: Vec::new(),
         params: DemParams {
             materials: vec![p],
             gravity: S::from_array(gravity),

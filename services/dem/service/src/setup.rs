@@ -1,5 +1,6 @@
 //! Scene → DEM state: the only place where the scene file meets the DEM library.
 
+use glam::DVec2;
 use grains_dem::contact::{ContactParams, Damping};
 use grains_dem::packing::lattice_in_box;
 use grains_dem::pipeline::{SAFE_FRACTION, critical_time_step};
@@ -45,14 +46,33 @@ fn grain_mass(dim: usize, r: f64, density: f64) -> f64 {
 }
 
 /// The largest DEM step the scene's DEM materials allow (the safe fraction of the smallest
-/// critical step), with what it comes from: (step, critical step, smallest grain mass, the
-/// material). `None` without DEM material.
+/// critical step), with what it comes from: (step, critical step, smallest grain mass or a free
+/// rigid body's effective mass, the material). `None` without DEM material.
 pub fn stable_step(scene: &Scene) -> Option<(f64, f64, f64, &DemMaterial, &str)> {
     let mut best: Option<(f64, f64, f64, &DemMaterial, &str)> = None;
     for body in scene.bodies.iter().filter(|b| matches!(b.model, Model::Dem | Model::Hybrid)) {
         let mat = &scene.materials[body.material];
         let Some(dem) = &mat.dem else { continue };
         let m_min = grain_mass(scene.dim(), min_radius(dem), mat.density);
+        let critical = critical_time_step(&contact_params(dem), m_min);
+        if best.is_none_or(|b| SAFE_FRACTION * critical < b.0) {
+            best = Some((SAFE_FRACTION * critical, critical, m_min, dem, &mat.name));
+        }
+    }
+    // A free rigid body: its effective mass at its farthest point, 1 / (1/m + R²/I), over 4
+    // (two faces flush touch with up to four vertex springs at once).
+    for r in scene
+        .rigids
+        .iter()
+        .filter(|r| r.motion == grains_protocol::scene::RigidMotion::Free)
+    {
+        let mat = &scene.materials[r.material];
+        let Some(dem) = &mat.dem else { continue };
+        let vertices: Vec<DVec2> = r.vertices.iter().map(|&[x, y]| DVec2::new(x, y)).collect();
+        let props = grains_dem::bodies::mass_properties(&vertices, r.radius);
+        let reach = vertices.iter().map(|&v| (v - props.centroid).length()).fold(0.0, f64::max) + r.radius;
+        let (m, inertia) = (mat.density * props.area, mat.density * props.second_moment);
+        let m_min = 0.25 / (1.0 / m + reach * reach / inertia);
         let critical = critical_time_step(&contact_params(dem), m_min);
         if best.is_none_or(|b| SAFE_FRACTION * critical < b.0) {
             best = Some((SAFE_FRACTION * critical, critical, m_min, dem, &mat.name));
@@ -88,6 +108,7 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
     let mut state = DemState::<S> {
         grains: Grains::default(),
         walls: Vec::new(),
+        bodies: Vec::new(),
         params,
         time: 0.0,
     };
@@ -110,6 +131,7 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
         }
     }
     add_walls(&mut state, scene);
+    add_rigids(&mut state, scene, &material_index);
     drop_grains_cut_by_walls(&mut state, &from_packing);
     Ok(state)
 }
@@ -263,16 +285,36 @@ fn add_walls<S: Space>(state: &mut DemState<S>, scene: &Scene) {
     }
 }
 
+/// The scene's rigid bodies (ids in scene order), with their material's density.
+fn add_rigids<S: Space>(state: &mut DemState<S>, scene: &Scene, material_index: &[u32]) {
+    use grains_dem::bodies::{Body, Motion};
+    use grains_protocol::scene::RigidMotion;
+    for (id, r) in scene.rigids.iter().enumerate() {
+        let vertices: Vec<DVec2> = r.vertices.iter().map(|&[x, y]| DVec2::new(x, y)).collect();
+        let velocity = DVec2::from_array(r.velocity);
+        let motion = match r.motion {
+            RigidMotion::Free => Motion::Free,
+            RigidMotion::Fixed => Motion::Fixed,
+            RigidMotion::Scripted => Motion::Scripted { velocity, spin: r.spin },
+        };
+        let density = scene.materials[r.material].density;
+        let mut body = Body::new(id as u64, &vertices, r.radius, density, material_index[r.material], motion);
+        body.v = velocity;
+        body.omega = r.spin;
+        state.bodies.push(body);
+    }
+}
+
 /// Lattice sites a wall cuts through (a drum's curve, a hopper's slope) stay empty; grains
-/// of a packing (`from_packing`, per grain) keep the small overlaps they settled with.
+/// of a packing (`from_packing`, per grain) keep the small overlaps they settled with. No
+/// grain starts in or on a rigid body.
 fn drop_grains_cut_by_walls<S: Space>(state: &mut DemState<S>, from_packing: &[bool]) {
     let keep: Vec<bool> = (0..state.grains.len())
         .map(|i| {
-            from_packing[i]
-                || state
-                    .walls
-                    .iter()
-                    .all(|w| grains_dem::neighbors::wall_gap(&w.shape, state.grains.x[i]) > state.grains.radius[i])
+            let (x, r) = (state.grains.x[i], state.grains.radius[i]);
+            let a = S::to_array(x);
+            let on_a_body = state.bodies.iter().any(|b| b.overlaps(DVec2::new(a[0], a[1]), r));
+            !on_a_body && (from_packing[i] || state.walls.iter().all(|w| grains_dem::neighbors::wall_gap(&w.shape, x) > r))
         })
         .collect();
     if keep.iter().any(|k| !k) {

@@ -55,7 +55,7 @@ impl<S: Space> DemSolver<S> {
         let energy_bound = runaway_bound(extent, S::from_array(scene.gravity).length(), &state);
         let (grid, kernel) = grains_service::grid::scene_grid(scene);
         let frames = match out_dir {
-            Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir, resume)?),
+            Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir, resume, &state)?),
             _ => None,
         };
         let walls_log = match out_dir {
@@ -147,8 +147,15 @@ fn walls_log_after(path: &std::path::Path, step: u64) -> std::io::Result<std::io
 /// energy every grain would have at the fastest wall's speed): a run that exceeds it is
 /// blowing up, not flowing.
 fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64 {
+    use grains_dem::bodies::Motion;
     let g = &state.grains;
-    let mass: f64 = g.mass.iter().sum();
+    let free = state.bodies.iter().filter(|b| b.motion == Motion::Free);
+    let mass: f64 = g.mass.iter().sum::<f64>() + free.map(|b| b.mass).sum::<f64>();
+    // Scripted bodies drive like walls.
+    let scripted = state.bodies.iter().filter_map(|b| match b.motion {
+        Motion::Scripted { velocity, spin } => Some(velocity.length() + spin.abs() * b.reach()),
+        _ => None,
+    });
     let wall_speed = state
         .walls
         .iter()
@@ -159,6 +166,7 @@ fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64
             };
             w.velocity.length() + spin
         })
+        .chain(scripted)
         .fold(0.0, f64::max);
     let bound = DemPipeline::kinetic_energy(state) + mass * g_norm * extent + 0.5 * mass * wall_speed * wall_speed;
     100.0 * bound.max(f64::MIN_POSITIVE)
@@ -241,7 +249,7 @@ impl<S: Space> Solver for DemSolver<S> {
             (Some(Command::Snapshot), _) => {
                 if self.frames.is_none() {
                     let dir = self.out_dir.as_deref().ok_or("no output directory: nowhere to write a snapshot")?;
-                    let writer = FrameWriter::new(dir, self.resumed).map_err(|e| e.to_string())?;
+                    let writer = FrameWriter::new(dir, self.resumed, &self.state).map_err(|e| e.to_string())?;
                     self.frames = Some((writer, 0));
                 }
                 let (f, every) = self.frames.as_mut().expect("made above");

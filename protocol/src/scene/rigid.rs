@@ -1,0 +1,232 @@
+//! `[[rigid]]`: rigid spheropolygons (Jiang 2020 §3), 2D: a convex polygon swept by a disk of
+//! radius `radius`, of a material's density and contact law, free, fixed or scripted. They
+//! run in the DEM and meet its grains, walls and each other.
+
+use super::Material;
+use super::errors::{Bound, Ctx, SceneError, in_range, vec3};
+use super::overrides::FieldPath;
+use super::raw::RawRigid;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RigidMotion {
+    /// By its forces and gravity, from `velocity` and `spin`.
+    Free,
+    /// Never moves (a floor, an obstacle glued in place).
+    Fixed,
+    /// At `velocity` and `spin`, whatever the forces (a tool, a gate).
+    Scripted,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rigid {
+    /// Index into the scene's materials (one with a `[material.dem]` table).
+    pub material: usize,
+    /// The polygon, counter-clockwise and convex, in scene coordinates [m] (one vertex: a
+    /// disk; two: a rod with round ends).
+    pub vertices: Vec<[f64; 2]>,
+    /// Sphero-radius [m] (0: a bare polygon, which needs three vertices).
+    pub radius: f64,
+    pub motion: RigidMotion,
+    /// Velocity of the centre of mass [m/s] and spin [rad/s, counter-clockwise]: the start of a
+    /// free body, the motion of a scripted one.
+    pub velocity: [f64; 2],
+    pub spin: f64,
+}
+
+pub(super) fn validate(ctx: &Ctx, dim: usize, raw: &[RawRigid], materials: &[Material]) -> Result<Vec<Rigid>, SceneError> {
+    raw.iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let at = FieldPath::root("rigid").index(i);
+            rigid(ctx, dim, r, materials, &|name| format!("{at}.{name}"))
+        })
+        .collect()
+}
+
+fn rigid(ctx: &Ctx, dim: usize, r: &RawRigid, materials: &[Material], f: &dyn Fn(&str) -> String) -> Result<Rigid, SceneError> {
+    if dim != 2 {
+        return Err(ctx.err(
+            Some(r.vertices.span()),
+            Some(&f("vertices")),
+            "rigid bodies are 2D (spheropolygons); 3D spheropolyhedra are not implemented".into(),
+        ));
+    }
+    let Some(material) = materials.iter().position(|m| &m.name == r.material.get_ref()) else {
+        let known: Vec<_> = materials.iter().map(|m| format!("`{}`", m.name)).collect();
+        return Err(ctx.err(
+            Some(r.material.span()),
+            Some(&f("material")),
+            format!("no material named `{}`; defined: {}", r.material.get_ref(), known.join(", ")),
+        ));
+    };
+    if materials[material].dem.is_none() {
+        return Err(ctx.err(
+            Some(r.material.span()),
+            Some(&f("material")),
+            format!(
+                "a rigid body takes its contact law from [material.dem]; `{}` has none",
+                r.material.get_ref()
+            ),
+        ));
+    }
+    let mut vertices = Vec::new();
+    for (k, v) in r.vertices.get_ref().iter().enumerate() {
+        if v.len() != 2 || v.iter().any(|x| !x.is_finite()) {
+            return Err(ctx.err(
+                Some(r.vertices.span()),
+                Some(&f("vertices")),
+                format!("vertex {k} must be 2 finite numbers, got {v:?}"),
+            ));
+        }
+        vertices.push([v[0], v[1]]);
+    }
+    let radius = match &r.radius {
+        Some(a) => in_range(ctx, a, &f("radius"), Bound::Closed(0.0), Bound::None)?,
+        None => 0.0,
+    };
+    if let Err(why) = check_polygon(&vertices, radius) {
+        return Err(ctx.err(Some(r.vertices.span()), Some(&f("vertices")), why));
+    }
+    let motion = match r.motion.as_ref().map(|m| (m, m.get_ref().as_str())) {
+        None | Some((_, "free")) => RigidMotion::Free,
+        Some((_, "fixed")) => RigidMotion::Fixed,
+        Some((_, "scripted")) => RigidMotion::Scripted,
+        Some((m, other)) => {
+            return Err(ctx.err(
+                Some(m.span()),
+                Some(&f("motion")),
+                format!("must be \"free\", \"fixed\" or \"scripted\", got {other:?}"),
+            ));
+        }
+    };
+    let velocity = match &r.velocity {
+        Some(v) => {
+            let v = vec3(ctx, dim, v, &f("velocity"))?;
+            [v[0], v[1]]
+        }
+        None => [0.0; 2],
+    };
+    let spin = match &r.spin {
+        Some(s) => in_range(ctx, s, &f("spin"), Bound::None, Bound::None)?,
+        None => 0.0,
+    };
+    if motion == RigidMotion::Fixed && (velocity != [0.0; 2] || spin != 0.0) {
+        return Err(ctx.err(
+            Some(r.motion.as_ref().map_or(r.vertices.span(), |m| m.span())),
+            Some(&f("motion")),
+            "a fixed body does not move: give it no velocity or spin, or make it \"scripted\"".into(),
+        ));
+    }
+    Ok(Rigid {
+        material,
+        vertices,
+        radius,
+        motion,
+        velocity,
+        spin,
+    })
+}
+
+fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[1] - a[1] * b[0]
+}
+
+/// Why `vertices` swept by `radius` cannot be a body, if it cannot: no vertex, a repeated
+/// vertex, not convex or not counter-clockwise, or no area.
+pub fn check_polygon(vertices: &[[f64; 2]], radius: f64) -> Result<(), String> {
+    let n = vertices.len();
+    if n == 0 {
+        return Err("a rigid body needs at least one vertex".into());
+    }
+    if n < 3 && radius == 0.0 {
+        return Err(format!(
+            "{n} vertices swept by radius 0 have no area: give a radius or 3 vertices or more"
+        ));
+    }
+    let d = |k: usize| {
+        let (a, b) = (vertices[k], vertices[(k + 1) % n]);
+        [b[0] - a[0], b[1] - a[1]]
+    };
+    if n == 2 && d(0) == [0.0; 2] {
+        return Err("its two vertices coincide".into());
+    }
+    if n < 3 {
+        return Ok(());
+    }
+    for k in 0..n {
+        if d(k) == [0.0; 2] {
+            return Err(format!("vertices {k} and {} coincide", (k + 1) % n));
+        }
+        if cross(d(k), d((k + 1) % n)) <= 0.0 {
+            return Err(format!(
+                "the polygon must be convex with its vertices counter-clockwise; at vertex {} it turns clockwise or not at all",
+                (k + 1) % n
+            ));
+        }
+    }
+    // Convex at every vertex but wound more than once (a star): the turns exceed 2π.
+    let turns: f64 = (0..n)
+        .map(|k| {
+            let (a, b) = (d(k), d((k + 1) % n));
+            cross(a, b).atan2(a[0] * b[0] + a[1] * b[1])
+        })
+        .sum();
+    if turns > 2.0 * std::f64::consts::PI + 1e-9 {
+        return Err("the polygon winds around more than once; give a simple convex one".into());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{DEM, check_err, edit, line_of};
+    use super::check_polygon;
+
+    const SQUARE: &str =
+        "\n[[rigid]]\nmaterial = \"glass\"\nvertices = [[0.0, 0.0], [0.01, 0.0], [0.01, 0.01], [0.0, 0.01]]\nradius = 0.0005\n";
+
+    #[test]
+    fn polygons_are_checked() {
+        let sq = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        assert!(check_polygon(&sq, 0.0).is_ok() && check_polygon(&sq[..1], 0.1).is_ok() && check_polygon(&sq[..2], 0.1).is_ok());
+        assert!(check_polygon(&sq[..2], 0.0).unwrap_err().contains("no area"));
+        let clockwise: Vec<_> = sq.iter().rev().copied().collect();
+        assert!(check_polygon(&clockwise, 0.0).unwrap_err().contains("counter-clockwise"));
+        let dart = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.3], [1.0, 2.0]];
+        assert!(check_polygon(&dart, 0.0).is_err());
+        let star = [[0.0, 1.0], [-0.59, -0.81], [0.95, 0.31], [-0.95, 0.31], [0.59, -0.81]];
+        assert!(check_polygon(&star, 0.0).unwrap_err().contains("more than once"));
+        assert!(check_polygon(&[], 0.1).is_err() && check_polygon(&[[1.0, 0.0], [1.0, 0.0]], 0.1).is_err());
+    }
+
+    #[test]
+    fn rigid_errors_name_the_body_and_the_field() {
+        let ok = format!("{DEM}{SQUARE}");
+        let scene = super::super::from_str(&ok, std::path::Path::new("t.toml"), 0).unwrap();
+        assert_eq!(scene.rigids.len(), 1);
+        assert_eq!((scene.rigids[0].radius, scene.rigids[0].motion), (0.0005, super::RigidMotion::Free));
+        let text = edit(&ok, "[0.01, 0.01], [0.0, 0.01]", "[0.0, 0.01], [0.01, 0.01]");
+        check_err(
+            &text,
+            Some(line_of(&text, "vertices = [[0.0")),
+            "rigid.0.vertices",
+            "counter-clockwise",
+        );
+        let text = edit(&ok, "material = \"glass\"\nvertices", "material = \"granite\"\nvertices");
+        check_err(
+            &text,
+            Some(line_of(&text, "material = \"granite\"")),
+            "rigid.0.material",
+            "no material named `granite`",
+        );
+        let text = format!("{ok}motion = \"glued\"\n");
+        check_err(
+            &text,
+            Some(line_of(&text, "motion = ")),
+            "rigid.0.motion",
+            "\"free\", \"fixed\" or \"scripted\"",
+        );
+        let text = format!("{ok}motion = \"fixed\"\nspin = 1.0\n");
+        check_err(&text, Some(line_of(&text, "motion = ")), "rigid.0.motion", "does not move");
+    }
+}

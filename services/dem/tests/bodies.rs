@@ -1,0 +1,235 @@
+//! Rigid spheropolygons (Jiang 2020 §3) against rigid-body mechanics, through the DEM's own
+//! step: impacts against the impulse of a restitution e (Newton's law along the normal), a
+//! body at rest on a floor against statics, sliding against Coulomb's law.
+
+use glam::DVec2;
+use grains_dem::bodies::{Body, Motion};
+use grains_dem::contact::{ContactParams, Damping};
+use grains_dem::pipeline::DemPipeline;
+use grains_dem::space::D2;
+use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+
+const DENSITY: f64 = 2500.0;
+const KN: f64 = 1e7;
+
+fn law(e: f64, mu: f64) -> ContactParams {
+    ContactParams {
+        stiffness_normal: KN,
+        stiffness_tangential: 0.5 * KN,
+        damping: Damping::Restitution(e),
+        friction: mu,
+        cohesion_normal: 0.0,
+        cohesion_tangential: 0.0,
+        damping_scale: 1.0,
+    }
+}
+
+fn state(law: ContactParams, gravity: DVec2, bodies: Vec<Body>, walls: Vec<Wall<D2>>) -> DemState<D2> {
+    DemState {
+        grains: Grains::default(),
+        walls,
+        bodies,
+        params: DemParams {
+            materials: vec![law],
+            gravity,
+            domain: Domain {
+                min: [-1.0; 3],
+                max: [1.0; 3],
+                periodic: [false; 3],
+            },
+            skin: 1e-4,
+        },
+        time: 0.0,
+    }
+}
+
+/// A square of side `s` centred at `c` (counter-clockwise).
+fn square(c: DVec2, s: f64) -> Vec<DVec2> {
+    let h = 0.5 * s;
+    vec![
+        c + DVec2::new(-h, -h),
+        c + DVec2::new(h, -h),
+        c + DVec2::new(h, h),
+        c + DVec2::new(-h, h),
+    ]
+}
+
+/// A square of side `s` standing on a corner (a diamond), centred at `c`.
+fn diamond(c: DVec2, s: f64) -> Vec<DVec2> {
+    let h = s / 2f64.sqrt();
+    vec![
+        c + DVec2::new(h, 0.0),
+        c + DVec2::new(0.0, h),
+        c + DVec2::new(-h, 0.0),
+        c + DVec2::new(0.0, -h),
+    ]
+}
+
+fn run(st: &mut DemState<D2>, dt: f64, seconds: f64) {
+    let mut p = DemPipeline::<D2>::new(1).unwrap();
+    p.run(st, dt, (seconds / dt).round() as usize);
+}
+
+fn assert_close(actual: f64, expected: f64, tol: f64, what: &str) {
+    assert!(
+        (actual - expected).abs() <= tol,
+        "{what}: {actual} vs {expected} (tolerance {tol:e})"
+    );
+}
+
+/// A diamond's corner hits a square's face at v: head-on when the corner is on the square's
+/// centre line, off it by `offset` otherwise. Frictionless, restitution `e`. Returns (body A
+/// after, body B after, the contact's arm on B, m_A, m_B, I_B).
+fn impact(e: f64, offset: f64) -> (Body, Body, DVec2) {
+    let (s, a, v) = (0.02, 0.001, 1.0);
+    let hit = Body::new(0, &diamond(DVec2::new(-0.03, offset), s), a, DENSITY, 0, Motion::Free);
+    let mut target = Body::new(1, &square(DVec2::ZERO, s), a, DENSITY, 0, Motion::Free);
+    target.motion = Motion::Free;
+    let mut hit = hit;
+    hit.v = DVec2::new(v, 0.0);
+    let arm = DVec2::new(-0.5 * s - a, offset);
+    let mut st = state(law(e, 0.0), DVec2::ZERO, vec![hit, target], Vec::new());
+    run(&mut st, 1e-6, 0.03);
+    (st.bodies[0].clone(), st.bodies[1].clone(), arm)
+}
+
+/// Head-on (the corner on the line of the centres): the rebound is Newton's, v_A' = (m_A −
+/// e m_B) v / (m_A + m_B), v_B' = (1 + e) m_A v / (m_A + m_B), and nothing turns.
+#[test]
+fn a_head_on_impact_rebounds_with_the_restitution_of_the_law() {
+    for e in [0.2, 0.5, 0.9] {
+        let (a, b, _) = impact(e, 0.0);
+        let (ma, mb) = (a.mass, b.mass);
+        let before = 1.0;
+        assert_close(a.v.x, (ma - e * mb) * before / (ma + mb), 2e-3, "A's velocity");
+        assert_close(b.v.x, (1.0 + e) * ma * before / (ma + mb), 2e-3, "B's velocity");
+        assert!(a.omega.abs() < 1e-9 && b.omega.abs() < 1e-9, "spins {} {}", a.omega, b.omega);
+        assert!(a.v.y.abs() < 1e-9 && b.v.y.abs() < 1e-9);
+    }
+}
+
+/// Off the centre line by 6 mm (the square's half side is 10 mm): the normal impulse of a
+/// rigid-body impact with restitution e, J = (1 + e) v / (1/m_A + 1/m_B + (r_B × N)²/I_B) (the
+/// corner's arm on A is along N), turns B by ω_B = (r_B × J)/I_B; momentum and angular
+/// momentum are kept.
+#[test]
+fn an_off_centre_impact_turns_the_body_by_the_impulse_s_torque() {
+    let (e, offset) = (0.5, 0.006);
+    let (a, b, arm) = impact(e, offset);
+    let (ma, mb, ib) = (a.mass, b.mass, b.inertia);
+    // r_B × N with N = −x (from B to A): r_x · 0 − r_y · (−1).
+    let cross = arm.y;
+    let j = (1.0 + e) * 1.0 / (1.0 / ma + 1.0 / mb + cross * cross / ib);
+    assert_close(a.v.x, 1.0 - j / ma, 3e-3, "A's velocity");
+    assert_close(b.v.x, j / mb, 3e-3, "B's velocity");
+    // The impulse on B is +x at r_B = (−s/2 − a, offset): ω_B = (r_B × (J x̂)) / I_B = −offset J / I_B.
+    let expected = -offset * j / ib;
+    assert_close(b.omega, expected, 0.01 * expected.abs(), "B's spin");
+    // A is hit on its centre line; only B's turning during the contact (about 0.01 rad at
+    // this stiffness) tilts the normal off it: A's angular impulse is a small share of B's.
+    eprintln!(
+        "A: v {} ω {}; B: v {} ω {} (expected {expected}); J {j}",
+        a.v, a.omega, b.v, b.omega
+    );
+    assert!(
+        (a.inertia * a.omega).abs() < 0.02 * (ib * b.omega).abs(),
+        "A's angular impulse {} against B's {}",
+        a.inertia * a.omega,
+        ib * b.omega
+    );
+    // Momentum, and angular momentum about the origin (both bodies).
+    assert_close(ma * a.v.x + mb * b.v.x, ma, 1e-9 * ma, "momentum");
+    let l = |b: &Body| b.inertia * b.omega + b.mass * (b.x.x * b.v.y - b.x.y * b.v.x);
+    assert_close(l(&a) + l(&b), -ma * offset, 1e-9 * ma * offset, "angular momentum");
+}
+
+/// A square on a floor, at rest after settling: the floor carries its weight (statics), to
+/// 0.1%, whether the floor is a wall or a fixed body.
+#[test]
+fn a_square_at_rest_on_a_floor_weighs_its_weight() {
+    let g = DVec2::new(0.0, -9.81);
+    let (s, a) = (0.01, 0.0005);
+    for floor_is_a_body in [false, true] {
+        let sq = Body::new(0, &square(DVec2::new(0.0, 0.5 * s + a + 1e-4), s), a, DENSITY, 0, Motion::Free);
+        let weight = sq.mass * 9.81;
+        let (bodies, walls) = if floor_is_a_body {
+            let slab = vec![
+                DVec2::new(-0.05, -0.01),
+                DVec2::new(0.05, -0.01),
+                DVec2::new(0.05, 0.0),
+                DVec2::new(-0.05, 0.0),
+            ];
+            (vec![sq, Body::new(1, &slab, 0.0, DENSITY, 0, Motion::Fixed)], Vec::new())
+        } else {
+            (vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, 0.5)])
+        };
+        let mut st = state(law(0.3, 0.5), g, bodies, walls);
+        run(&mut st, 2e-6, 0.2);
+        let b = &st.bodies[0];
+        assert_close(b.force.y, weight, 1e-3 * weight, "the floor's force on the square");
+        assert!(b.force.x.abs() < 1e-6 * weight, "no sideways force: {}", b.force.x);
+        assert!(b.v.length() < 1e-6 && b.omega.abs() < 1e-4, "at rest: {} {}", b.v, b.omega);
+        if floor_is_a_body {
+            assert_close(st.bodies[1].force.y, -weight, 1e-3 * weight, "the square's force on the floor");
+        }
+    }
+}
+
+/// The square on a floor tilted by gravity at θ: with tan θ > μ it slides and the friction is
+/// μ times the normal force (Coulomb's slip); with tan θ < μ it sticks and the friction
+/// carries the weight's slope component, m g sin θ < μ N.
+#[test]
+fn friction_holds_below_the_slip_limit_and_is_mu_n_at_it() {
+    let mu = 0.4;
+    let (s, a) = (0.01, 0.0005);
+    for theta in [15f64.to_radians(), 30f64.to_radians()] {
+        let g = DVec2::new(9.81 * theta.sin(), -9.81 * theta.cos());
+        let sq = Body::new(0, &square(DVec2::new(0.0, 0.5 * s + a), s), a, DENSITY, 0, Motion::Free);
+        let m = sq.mass;
+        let mut st = state(law(0.3, mu), g, vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, mu)]);
+        run(&mut st, 2e-6, 0.1);
+        let b = &st.bodies[0];
+        let normal = m * 9.81 * theta.cos();
+        assert_close(b.force.y, normal, 1e-3 * normal, "normal force");
+        if theta.tan() > mu {
+            assert_close(-b.force.x, mu * b.force.y, 1e-3 * normal, "sliding friction = mu N");
+            let accel = 9.81 * (theta.sin() - mu * theta.cos());
+            assert_close(b.v.x, accel * 0.1, 0.01 * accel * 0.1, "slides at g (sin θ − μ cos θ)");
+        } else {
+            assert_close(-b.force.x, m * 9.81 * theta.sin(), 1e-3 * normal, "sticking friction = m g sin θ");
+            assert!(b.v.length() < 1e-5, "sticks: {}", b.v);
+        }
+    }
+}
+
+/// A grain dropped on a fixed body comes to rest on it with its weight carried (the grain
+/// meets the body as a one-vertex body of its radius), and the body records the load.
+#[test]
+fn a_grain_rests_on_a_fixed_body() {
+    let g = DVec2::new(0.0, -9.81);
+    let slab = vec![
+        DVec2::new(-0.05, -0.01),
+        DVec2::new(0.05, -0.01),
+        DVec2::new(0.05, 0.0),
+        DVec2::new(-0.05, 0.0),
+    ];
+    let mut st = state(
+        law(0.3, 0.5),
+        g,
+        vec![Body::new(0, &slab, 0.0005, DENSITY, 0, Motion::Fixed)],
+        Vec::new(),
+    );
+    let r = 0.001;
+    let m = Grains::<D2>::mass_of(r, DENSITY);
+    st.grains.push(7, DVec2::new(0.003, 0.0005 + r + 2e-4), r, m, 0);
+    run(&mut st, 1e-6, 0.1);
+    let weight = m * 9.81;
+    assert_close(
+        st.grains.x[0].y,
+        0.0005 + r - weight / KN,
+        1e-7,
+        "resting height (overlap m g / k_n)",
+    );
+    assert!(st.grains.v[0].length() < 1e-6);
+    assert_close(st.bodies[0].force.y, -weight, 1e-3 * weight, "load on the body");
+}
