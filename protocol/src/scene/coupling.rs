@@ -60,6 +60,14 @@ pub enum GrainTransfer {
     /// after them: a resting band stays at rest and a flowing band rolls
     /// (`docs/validate/column_collapse.md`).
     Flip,
+    /// Yue 2018 §3.7 as its text reads: the grid's velocities go back to the grains "in the
+    /// same manner as MPM points", which blend PIC and FLIP with the share β of §3.4
+    /// (`mpm.flip`; APIC's points take the grid's velocity, so β = 0 there); the grain then
+    /// moves from its saved position with that velocity (Alg. 6). Translation only: its spin
+    /// is its contacts' (§7: a band grain without contacts spins in place). Measured: it
+    /// over-runs the column as `Flip` does, and a resting band does not come to rest
+    /// (`docs/validation.md`); kept to show what the paper's text gives.
+    Points,
 }
 
 /// `[coupling]`; the zones default to two cells of `cell_size` each.
@@ -127,12 +135,13 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
         },
         grain_transfer: match c.grain_transfer.as_ref().map(|t| (t, t.get_ref().as_str())) {
             Some((_, "pic")) => GrainTransfer::Pic,
+            Some((_, "points")) => GrainTransfer::Points,
             None | Some((_, "flip")) => GrainTransfer::Flip,
             Some((t, other)) => {
                 return Err(ctx.err(
                     Some(t.span()),
                     Some("coupling.grain_transfer"),
-                    format!("must be \"flip\" or \"pic\", got {other:?}"),
+                    format!("must be \"flip\", \"pic\" or \"points\", got {other:?}"),
                 ));
             }
         },

@@ -25,7 +25,7 @@ use crate::state::DemState;
 use grains_grid::{Grid, Kernel, Vector};
 
 /// How a hybrid grain takes the coupler's node velocities back (Alg. 5–6).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum GrainTransfer {
     /// Alg. 5–6 as written: the grain's velocity becomes the velocity interpolated from the
     /// coupler's node velocities (its own raster's elsewhere), its spin that field's, and it
@@ -37,6 +37,11 @@ pub enum GrainTransfer {
     /// carry the last step's coupling force of the nodes around each grain, which the raster
     /// the coupler gets leaves out.
     Flip,
+    /// Yue 2018 §3.7's "in the same manner as MPM points": the grain's substepped velocity
+    /// plus the coupling's change (FLIP) blended with the interpolated velocity (PIC) at this
+    /// FLIP share β, then it moves from its saved position with that velocity (Alg. 6); its
+    /// spin is its contacts'.
+    Points(f64),
 }
 
 /// What stays fixed for a run: the MPM's grid and kernel, and the transfer back.
@@ -198,7 +203,8 @@ impl<S: Space> CoupledStep<S> {
     /// next step's substeps. With [`GrainTransfer::Pic`] it takes the velocity interpolated
     /// from the coupler's node velocities (its own raster's elsewhere) and the spin of that
     /// field, and moves from its saved position with that velocity. The other grains keep
-    /// their substepped state.
+    /// their substepped state. [`GrainTransfer::Points`] blends the two velocities as the
+    /// MPM's points do and moves the grain from its saved position with the blend.
     pub fn finish(
         &mut self,
         state: &mut DemState<S>,
@@ -253,6 +259,11 @@ impl<S: Space> CoupledStep<S> {
                 if rate * rate * d < self.params.quasi_static * self.params.quasi_static * self.params.gravity {
                     g.omega[i] = grad.spin::<S>();
                 }
+            } else if let GrainTransfer::Points(beta) = self.params.transfer {
+                let (v_pic, _) = self.stencils.interpolate(k, node_velocity);
+                let (dv, _) = self.stencils.interpolate(k, change);
+                g.v[i] = (g.v[i] + dv) * beta + v_pic * (1.0 - beta);
+                g.x[i] = x0 + g.v[i] * dt;
             } else {
                 let (v, grad) = self.stencils.interpolate(k, node_velocity);
                 g.v[i] = v;

@@ -94,7 +94,7 @@ fn weighted_momentum(g: &Grains<D2>) -> DVec2 {
 /// nothing is rasterized and every grain keeps its substepped state.
 #[test]
 fn without_hybrid_grains_the_coupled_step_is_the_step_alone() {
-    for transfer in [GrainTransfer::Flip, GrainTransfer::Pic] {
+    for transfer in [GrainTransfer::Flip, GrainTransfer::Pic, GrainTransfer::Points(0.95)] {
         let (mut alone, mut coupled) = (bed(), bed());
         let (mut pipe_alone, mut pipe_coupled) = (DemPipeline::<D2>::new(1).unwrap(), DemPipeline::<D2>::new(1).unwrap());
         let mut step = stage(transfer, GIMP);
@@ -115,7 +115,7 @@ fn without_hybrid_grains_the_coupled_step_is_the_step_alone() {
 /// with either transfer and kernel.
 #[test]
 fn hybrid_grains_round_trip_through_their_raster_keeping_momentum() {
-    for transfer in [GrainTransfer::Flip, GrainTransfer::Pic] {
+    for transfer in [GrainTransfer::Flip, GrainTransfer::Pic, GrainTransfer::Points(0.95)] {
         for kernel in [GIMP, Kernel::Bspline2] {
             let mut st = bed();
             st.grains.scale.iter_mut().for_each(|s| *s = 0.5);
@@ -212,6 +212,70 @@ fn pic_advects_from_the_saved_position() {
     assert!(close(g.v[0], u, 1e-12), "{:?} vs {u:?}", g.v[0]);
     assert!(g.omega[0].abs() < 1e-9, "spin {}", g.omega[0]);
     assert!(close(g.x[0], x0 + u * DT, 1e-14), "{:?} vs {:?}", g.x[0], x0 + u * DT);
+}
+
+/// With "points" (Yue 2018 §3.7: "in the same manner as MPM points") a lone hybrid grain at
+/// v0, its raster's nodes constrained to u, takes β (v0 + (u − v0)) + (1 − β) u = u whatever
+/// β when the field is its own; with the nodes it shares moved by a uniform u against its
+/// own raster velocity v0 it keeps the blend of its own velocity plus the change (FLIP) and
+/// u (PIC), moves with that from its saved position (Alg. 6), and keeps its spin.
+#[test]
+fn points_blend_the_grain_s_own_velocity_and_the_grid_s_as_the_mpm_points_do() {
+    let (v0, u, beta) = (DVec2::new(0.3, 0.1), DVec2::new(-0.02, 0.05), 0.9);
+    let mut st = lone_grain(0.5, v0);
+    st.grains.omega[0] = 40.0;
+    let x0 = st.grains.x[0];
+    let mut pipe = DemPipeline::<D2>::new(1).unwrap();
+    let mut step = stage(GrainTransfer::Points(beta), GIMP);
+    let nodes: Vec<u64> = step.predict(&mut st, &mut pipe, DT, SUBSTEPS).iter().map(|r| r.node).collect();
+    step.finish(&mut st, &mut pipe, nodes.iter().map(|&n| (n, u)), DT);
+    let g = &st.grains;
+    // Alone on its nodes its raster velocity is v0, so FLIP gives v0 + (u − v0) = u, as PIC.
+    assert!(close(g.v[0], u, 1e-12), "{:?} vs {u:?}", g.v[0]);
+    assert_eq!(g.omega[0], 40.0, "its spin is its own");
+    assert!(close(g.x[0], x0 + u * DT, 1e-14), "{:?} vs {:?}", g.x[0], x0 + u * DT);
+    // Two grains on the same nodes at other velocities, every node's velocity moved by u:
+    // β = 1 (FLIP) gives each its own velocity + u, β = 0 (PIC) the interpolated node
+    // velocity, which differs from both, and β the blend of the two.
+    let after = |beta: f64| {
+        let mut st = lone_grain(0.5, v0);
+        let j = st.grains.push(
+            8,
+            st.grains.x[0] + DVec2::new(1e-4, 0.0),
+            RADIUS,
+            Grains::<D2>::mass_of(RADIUS, DENSITY),
+            0,
+        );
+        st.grains.scale[j] = 0.5;
+        st.grains.v[j] = -v0;
+        let mut pipe = DemPipeline::<D2>::new(1).unwrap();
+        let mut step = stage(GrainTransfer::Points(beta), GIMP);
+        let moved: Vec<(u64, DVec2)> = step
+            .predict(&mut st, &mut pipe, DT, SUBSTEPS)
+            .iter()
+            .map(|r| (r.node, r.momentum * (1.0 / r.mass) + u))
+            .collect();
+        let before = [st.grains.v[0], st.grains.v[j]];
+        step.finish(&mut st, &mut pipe, moved, DT);
+        (before, [st.grains.v[0], st.grains.v[j]])
+    };
+    let (before, flip) = after(1.0);
+    let (_, pic) = after(0.0);
+    let (_, blend) = after(beta);
+    for k in 0..2 {
+        assert!(
+            close(flip[k], before[k] + u, 1e-12),
+            "FLIP {k}: {:?} vs {:?}",
+            flip[k],
+            before[k] + u
+        );
+        assert!(
+            (pic[k] - flip[k]).length() > 1e-3 * v0.length(),
+            "PIC {k} equals FLIP: {:?}",
+            pic[k]
+        );
+        assert!(close(blend[k], flip[k] * beta + pic[k] * (1.0 - beta), 1e-12), "blend {k}");
+    }
 }
 
 /// The substeps of a coupled step keep every grain at its storage index (the stage addresses

@@ -81,6 +81,8 @@ impl<S: Space> DemSolver<S> {
                 transfer: match scene.coupling.grain_transfer {
                     GrainTransfer::Pic => grains_dem::GrainTransfer::Pic,
                     GrainTransfer::Flip => grains_dem::GrainTransfer::Flip,
+                    // As the MPM's points (APIC's take the grid's velocity).
+                    GrainTransfer::Points => grains_dem::GrainTransfer::Points(scene.mpm.flip.unwrap_or(0.0)),
                 },
                 quasi_static: scene.coupling.quasi_static,
                 gravity: S::from_array(scene.gravity).length(),
