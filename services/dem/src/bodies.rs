@@ -66,6 +66,10 @@ pub struct Body {
     /// Force [N] and torque [N m] of its contacts at the last evaluation (gravity not in it).
     pub force: DVec2,
     pub torque: f64,
+    /// Force [N] and torque [N m] added at every step: the reactions of the material points
+    /// in contact with it ([`point_forces`]), held over a macro-step.
+    pub external: DVec2,
+    pub external_torque: f64,
 }
 
 /// Area, centroid and polar second moment (about the centroid, per unit density) of a convex
@@ -185,6 +189,8 @@ impl Body {
             motion,
             force: DVec2::ZERO,
             torque: 0.0,
+            external: DVec2::ZERO,
+            external_torque: 0.0,
         }
     }
 
@@ -291,13 +297,14 @@ pub struct Side {
     pub inv_inertia: f64,
 }
 
-/// What a contact is between, for its history: a body's vertex and a body, a grain (by id)
-/// and a body, or a body's vertex and a wall (walls and grains are vertex `u32::MAX` where
+/// What a contact is between, for its history: a body's vertex and a body, a grain or a
+/// material point (by id) and a body, or a body's vertex and a wall (walls and grains are vertex `u32::MAX` where
 /// they have none).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
 pub enum Key {
     Bodies { of: u64, vertex: u32, on: u64 },
     Grain { grain: u64, body: u64 },
+    Point { point: u64, body: u64 },
     Wall { body: u64, vertex: u32, wall: u32 },
 }
 
@@ -416,31 +423,10 @@ pub fn forces(
                 }
             }
         }
-        for grain in grains {
-            let reach = bodies[i].reach() + grain.radius;
-            if (grain.x - bodies[i].x).length_squared() > reach * reach {
-                continue;
-            }
-            let (y, _) = nearest(&polys[i], grain.x);
-            let key = Key::Grain {
-                grain: grain.id,
-                body: bodies[i].id,
-            };
-            let mut state = history(&key);
-            let side = Side {
-                x: grain.x,
-                v: grain.v,
-                omega: grain.omega,
-                inv_mass: grain.inv_mass,
-                inv_inertia: 0.0,
-            };
-            let a = bodies[i].radius;
-            if let Some(t) = touch(&law, grain.x, grain.radius, &side, y, a, &sides[i], grain.scale, dt, &mut state) {
-                apply(&mut load, i, -t.force, t.point);
-                on_grains.push((grain.index, t.force, cross(t.point - grain.x, t.force)));
-                list.push((key, state));
-            }
-        }
+        let grain_key = |grain, body| Key::Grain { grain, body };
+        on_grains.extend(disk_contacts(
+            i, &bodies[i], &polys[i], &sides[i], &law, grains, grain_key, dt, &history, &mut list, &mut load,
+        ));
         for (w, wall) in walls.iter().enumerate() {
             let mut law = law;
             law.friction = wall.friction;
@@ -521,6 +507,83 @@ pub fn forces(
     on_grains
 }
 
+/// The contacts of body `i` (world polygon `poly`, side `side`, law `law`) with `disks`
+/// (grains, or material points as disks of their contact radius), keyed by `key(disk id, body
+/// id)`: each one's history from `history`, pushed to `list`; the reaction added to
+/// `load[i]`; returns (disk index, force on the disk, its torque about the disk's centre).
+#[allow(clippy::too_many_arguments)]
+fn disk_contacts(
+    i: usize,
+    body: &Body,
+    poly: &[DVec2],
+    side: &Side,
+    law: &ContactParams,
+    disks: &[GrainView],
+    key: impl Fn(u64, u64) -> Key,
+    dt: f64,
+    history: &impl Fn(&Key) -> ContactState<DVec2>,
+    list: &mut Vec<(Key, ContactState<DVec2>)>,
+    load: &mut [(DVec2, f64)],
+) -> Vec<(usize, DVec2, f64)> {
+    let mut out = Vec::new();
+    for disk in disks {
+        let reach = body.reach() + disk.radius;
+        if (disk.x - body.x).length_squared() > reach * reach {
+            continue;
+        }
+        let (y, _) = nearest(poly, disk.x);
+        let k = key(disk.id, body.id);
+        let mut state = history(&k);
+        let s = Side {
+            x: disk.x,
+            v: disk.v,
+            omega: disk.omega,
+            inv_mass: disk.inv_mass,
+            inv_inertia: 0.0,
+        };
+        if let Some(t) = touch(law, disk.x, disk.radius, &s, y, body.radius, side, disk.scale, dt, &mut state) {
+            load[i].0 -= t.force;
+            load[i].1 -= cross(t.point - side.x, t.force);
+            out.push((disk.index, t.force, cross(t.point - disk.x, t.force)));
+            list.push((k, state));
+        }
+    }
+    out
+}
+
+/// Jiang 2020 §4 (eqs. 44–50): material points within reach of a body meet it as disks of
+/// their contact radius r_p (`points`, `inv_mass` 1/m_p) by the body's law. Returns the force
+/// on each point touched (its `index`), to act on the point (eq. 46–48: an external force
+/// the MPM spreads to its nodes), and sets each body's `external` force and torque to the
+/// reactions, which its steps then carry (eq. 49–50); advances `contacts` by dt.
+pub fn point_forces(
+    bodies: &mut [Body],
+    points: &[GrainView],
+    materials: &[ContactParams],
+    dt: f64,
+    contacts: &mut BodyContacts,
+) -> Vec<(usize, DVec2)> {
+    let old = std::mem::take(&mut contacts.list);
+    let history = |key: &Key| old.binary_search_by(|e| e.0.cmp(key)).map(|k| old[k].1).unwrap_or_default();
+    let mut list = Vec::new();
+    let mut load = vec![(DVec2::ZERO, 0.0); bodies.len()];
+    let mut out = Vec::new();
+    for (i, body) in bodies.iter().enumerate() {
+        let (poly, side) = (body.vertices(), body.side());
+        let law = materials[body.material as usize];
+        let key = |point, body| Key::Point { point, body };
+        let touched = disk_contacts(i, body, &poly, &side, &law, points, key, dt, &history, &mut list, &mut load);
+        out.extend(touched.into_iter().map(|(p, f, _)| (p, f)));
+    }
+    for (b, (f, t)) in bodies.iter_mut().zip(load) {
+        b.external = f;
+        b.external_torque = t;
+    }
+    list.sort_unstable_by_key(|e| e.0);
+    contacts.list = list;
+    out
+}
+
 /// The first half kick (forces of the last evaluation) and the drift of every body over dt.
 pub fn kick_drift(bodies: &mut [Body], gravity: DVec2, dt: f64) {
     half_kick(bodies, gravity, 0.5 * dt);
@@ -530,11 +593,11 @@ pub fn kick_drift(bodies: &mut [Body], gravity: DVec2, dt: f64) {
     }
 }
 
-/// Half a kick of h for the free bodies: v += h (F/m + g), ω += h τ/I.
+/// Half a kick of h for the free bodies: v += h ((F + F_ext)/m + g), ω += h (τ + τ_ext)/I.
 pub fn half_kick(bodies: &mut [Body], gravity: DVec2, h: f64) {
     for b in bodies.iter_mut().filter(|b| b.motion == Motion::Free) {
-        b.v += (b.force / b.mass + gravity) * h;
-        b.omega += b.torque / b.inertia * h;
+        b.v += ((b.force + b.external) / b.mass + gravity) * h;
+        b.omega += (b.torque + b.external_torque) / b.inertia * h;
     }
 }
 
