@@ -675,7 +675,8 @@ fn a_dem_scene_starts_only_the_dem_and_threads_give_the_same_physics() {
 /// Rigid bodies through a real run (`tests/scenes/rigid_floor_2d.toml`): grains and a free
 /// square settle on a fixed slab between frictionless walls; at rest the slab carries the
 /// weight of everything above it (statics: the square's m g plus the grains' Σ m g, to 1%),
-/// the square rests, and the bodies' outlines are frames of their own (`frames/bodies.pvd`).
+/// the square rests, and the bodies' outlines are frames of their own (`frames/bodies.pvd`);
+/// in process (`--transport inproc`) the same physics.
 #[test]
 fn a_fixed_rigid_floor_carries_the_weight_of_the_grains_and_the_free_body_on_it() {
     let _machine = machine();
@@ -704,6 +705,19 @@ fn a_fixed_rigid_floor_carries_the_weight_of_the_grains_and_the_free_body_on_it(
         force[4]
     );
     assert!(velocity[3].hypot(velocity[4]) < 1e-3, "the square rests: {velocity:?}");
+    // Threads give the same physics as processes (the kinetic energy includes the square's).
+    let (status, err) = run_to_end(&[
+        "run",
+        "tests/scenes/rigid_floor_2d.toml",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--transport",
+        "inproc",
+    ]);
+    assert!(status.success(), "{err}");
+    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(read(&dir), read(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
 

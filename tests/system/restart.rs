@@ -45,9 +45,9 @@ fn refs(a: &[String]) -> Vec<&str> {
     a.iter().map(String::as_str).collect()
 }
 
-/// A DEM, an MPM, a fixed-zone hybrid (with the flip transfer's carried node accelerations)
-/// and an adaptive hybrid (surface oracle every 100 steps: grains and points created and
-/// deleted; its zones, ids and generator carried), each killed after a checkpoint and rows
+/// A DEM, an MPM, a fixed-zone hybrid (with the flip transfer's carried node accelerations),
+/// an adaptive hybrid (surface oracle every 100 steps: grains and points created and
+/// deleted; its zones, ids and generator carried) and a DEM with rigid bodies, each killed after a checkpoint and rows
 /// beyond it, then resumed. The launcher is killed (SIGKILL: no summary, `metrics.csv.part`
 /// left as it was), except in the fixed-zone hybrid, where the MPM is (the launcher fails the
 /// run and finishes its outputs).
@@ -61,6 +61,8 @@ fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
         ("tests/scenes/mpm_small_2d.toml", "run.steps=3000", 500, None),
         ("tests/scenes/hybrid_pile_2d.toml", "run.duration=0.06", 200, Some("grains-mpm")),
         ("tests/scenes/hybrid_adaptive_2d.toml", "run.duration=0.05", 250, None),
+        // Rigid bodies: their state and contact histories are in the DEM's checkpoint.
+        ("tests/scenes/rigid_floor_2d.toml", "run.duration=0.15", 500, None),
     ];
     for (scene, steps, every, victim) in scenes {
         let every_s = every.to_string();
