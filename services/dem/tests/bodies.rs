@@ -144,32 +144,42 @@ fn an_off_centre_impact_turns_the_body_by_the_impulse_s_torque() {
 }
 
 /// A square on a floor, at rest after settling: the floor carries its weight (statics), to
-/// 0.1%, whether the floor is a wall or a fixed body.
+/// 0.1%, whether the floor is a plane wall, a fixed body, a segment wall or the bottom of a
+/// large drum.
 #[test]
 fn a_square_at_rest_on_a_floor_weighs_its_weight() {
     let g = DVec2::new(0.0, -9.81);
     let (s, a) = (0.01, 0.0005);
-    for floor_is_a_body in [false, true] {
+    for floor in ["plane", "body", "segment", "drum"] {
         let sq = Body::new(0, &square(DVec2::new(0.0, 0.5 * s + a + 1e-4), s), a, DENSITY, 0, Motion::Free);
         let weight = sq.mass * 9.81;
-        let (bodies, walls) = if floor_is_a_body {
-            let slab = vec![
-                DVec2::new(-0.05, -0.01),
-                DVec2::new(0.05, -0.01),
-                DVec2::new(0.05, 0.0),
-                DVec2::new(-0.05, 0.0),
-            ];
-            (vec![sq, Body::new(1, &slab, 0.0, DENSITY, 0, Motion::Fixed)], Vec::new())
-        } else {
-            (vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, 0.5)])
+        let (bodies, walls) = match floor {
+            "plane" => (vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, 0.5)]),
+            "body" => {
+                let slab = vec![
+                    DVec2::new(-0.05, -0.01),
+                    DVec2::new(0.05, -0.01),
+                    DVec2::new(0.05, 0.0),
+                    DVec2::new(-0.05, 0.0),
+                ];
+                (vec![sq, Body::new(1, &slab, 0.0, DENSITY, 0, Motion::Fixed)], Vec::new())
+            }
+            "segment" => (vec![sq], vec![Wall::segment(DVec2::new(-0.05, 0.0), DVec2::new(0.05, 0.0), 0.5)]),
+            // A drum of 1 m: its bottom is flat to 12 µm across the square.
+            _ => (vec![sq], vec![Wall::drum(DVec2::new(0.0, 1.0), 1.0, 0.5)]),
         };
         let mut st = state(law(0.3, 0.5), g, bodies, walls);
         run(&mut st, 2e-6, 0.2);
         let b = &st.bodies[0];
-        assert_close(b.force.y, weight, 1e-3 * weight, "the floor's force on the square");
-        assert!(b.force.x.abs() < 1e-6 * weight, "no sideways force: {}", b.force.x);
-        assert!(b.v.length() < 1e-6 && b.omega.abs() < 1e-4, "at rest: {} {}", b.v, b.omega);
-        if floor_is_a_body {
+        assert_close(
+            b.force.y,
+            weight,
+            1e-3 * weight,
+            &format!("{floor}: the floor's force on the square"),
+        );
+        assert!(b.force.x.abs() < 1e-6 * weight, "{floor}: no sideways force: {}", b.force.x);
+        assert!(b.v.length() < 1e-6 && b.omega.abs() < 1e-4, "{floor}: at rest: {} {}", b.v, b.omega);
+        if floor == "body" {
             assert_close(st.bodies[1].force.y, -weight, 1e-3 * weight, "the square's force on the floor");
         }
     }
