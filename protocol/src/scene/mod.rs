@@ -292,6 +292,13 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             "the scene has no [[body]] of material or [[rigid]] body (and is not a [synthetic] test scene): nothing to simulate".into(),
         ));
     }
+    if !rigids.is_empty() && domain.periodic.iter().any(|&p| p) {
+        return Err(ctx.err(
+            None,
+            Some("rigid"),
+            "rigid bodies do not cross periodic boundaries yet: a scene with [[rigid]] bodies takes no `domain.periodic` axis".into(),
+        ));
+    }
     if !rigids.is_empty() && bodies.iter().any(|b| b.model != Model::Dem) {
         return Err(ctx.err(
             None,

@@ -24,7 +24,7 @@ pub struct Rigid {
     /// The polygon, counter-clockwise and convex, in scene coordinates [m] (one vertex: a
     /// disk; two: a rod with round ends).
     pub vertices: Vec<[f64; 2]>,
-    /// Sphero-radius [m] (0: a bare polygon, which needs three vertices).
+    /// Sphero-radius [m], > 0: the contacts act within it.
     pub radius: f64,
     pub motion: RigidMotion,
     /// Velocity of the centre of mass [m/s] and spin [rad/s, counter-clockwise]: the start of a
@@ -80,11 +80,15 @@ fn rigid(ctx: &Ctx, dim: usize, r: &RawRigid, materials: &[Material], f: &dyn Fn
         }
         vertices.push([v[0], v[1]]);
     }
-    let radius = match &r.radius {
-        Some(a) => in_range(ctx, a, &f("radius"), Bound::Closed(0.0), Bound::None)?,
-        None => 0.0,
+    let Some(a) = &r.radius else {
+        return Err(ctx.err(
+            Some(r.vertices.span()),
+            Some(&f("radius")),
+            "a rigid body needs its sphero-radius `radius` [m] > 0 (its contacts act within it)".into(),
+        ));
     };
-    if let Err(why) = check_polygon(&vertices, radius) {
+    let radius = in_range(ctx, a, &f("radius"), Bound::Open(0.0), Bound::None)?;
+    if let Err(why) = check_polygon(&vertices) {
         return Err(ctx.err(Some(r.vertices.span()), Some(&f("vertices")), why));
     }
     let motion = match r.motion.as_ref().map(|m| (m, m.get_ref().as_str())) {
@@ -131,17 +135,12 @@ fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[1] - a[1] * b[0]
 }
 
-/// Why `vertices` swept by `radius` cannot be a body, if it cannot: no vertex, a repeated
-/// vertex, not convex or not counter-clockwise, or no area.
-pub fn check_polygon(vertices: &[[f64; 2]], radius: f64) -> Result<(), String> {
+/// Why `vertices` cannot be a body's polygon, if it cannot: no vertex, a repeated vertex, not
+/// convex or not counter-clockwise.
+pub fn check_polygon(vertices: &[[f64; 2]]) -> Result<(), String> {
     let n = vertices.len();
     if n == 0 {
         return Err("a rigid body needs at least one vertex".into());
-    }
-    if n < 3 && radius == 0.0 {
-        return Err(format!(
-            "{n} vertices swept by radius 0 have no area: give a radius or 3 vertices or more"
-        ));
     }
     let d = |k: usize| {
         let (a, b) = (vertices[k], vertices[(k + 1) % n]);
@@ -188,15 +187,14 @@ mod tests {
     #[test]
     fn polygons_are_checked() {
         let sq = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
-        assert!(check_polygon(&sq, 0.0).is_ok() && check_polygon(&sq[..1], 0.1).is_ok() && check_polygon(&sq[..2], 0.1).is_ok());
-        assert!(check_polygon(&sq[..2], 0.0).unwrap_err().contains("no area"));
+        assert!(check_polygon(&sq).is_ok() && check_polygon(&sq[..1]).is_ok() && check_polygon(&sq[..2]).is_ok());
         let clockwise: Vec<_> = sq.iter().rev().copied().collect();
-        assert!(check_polygon(&clockwise, 0.0).unwrap_err().contains("counter-clockwise"));
+        assert!(check_polygon(&clockwise).unwrap_err().contains("counter-clockwise"));
         let dart = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.3], [1.0, 2.0]];
-        assert!(check_polygon(&dart, 0.0).is_err());
+        assert!(check_polygon(&dart).is_err());
         let star = [[0.0, 1.0], [-0.59, -0.81], [0.95, 0.31], [-0.95, 0.31], [0.59, -0.81]];
-        assert!(check_polygon(&star, 0.0).unwrap_err().contains("more than once"));
-        assert!(check_polygon(&[], 0.1).is_err() && check_polygon(&[[1.0, 0.0], [1.0, 0.0]], 0.1).is_err());
+        assert!(check_polygon(&star).unwrap_err().contains("more than once"));
+        assert!(check_polygon(&[]).is_err() && check_polygon(&[[1.0, 0.0], [1.0, 0.0]]).is_err());
     }
 
     #[test]
@@ -228,5 +226,11 @@ mod tests {
         );
         let text = format!("{ok}motion = \"fixed\"\nspin = 1.0\n");
         check_err(&text, Some(line_of(&text, "motion = ")), "rigid.0.motion", "does not move");
+        let text = edit(&ok, "radius = 0.0005", "radius = 0.0");
+        check_err(&text, Some(line_of(&text, "radius = 0.0")), "rigid.0.radius", "must be > 0");
+        let text = edit(&ok, "radius = 0.0005\n", "");
+        check_err(&text, Some(line_of(&text, "vertices = [[0.0")), "rigid.0.radius", "sphero-radius");
+        let text = edit(&ok, "cell_size = 0.002", "cell_size = 0.002\nperiodic = [true, false]");
+        check_err(&text, None, "rigid", "periodic");
     }
 }

@@ -203,10 +203,7 @@ impl Body {
     /// Whether a disk at `p` of radius `r` overlaps the body (inside its polygon, or nearer to
     /// it than r + a).
     pub fn overlaps(&self, p: DVec2, r: f64) -> bool {
-        let poly = self.vertices();
-        let n = poly.len();
-        let inside = n >= 3 && (0..n).all(|k| cross(poly[(k + 1) % n] - poly[k], p - poly[k]) >= 0.0);
-        inside || (nearest(&poly, p).0 - p).length() < r + self.radius
+        near(&self.vertices(), p).gap < r + self.radius
     }
 
     /// The outline of the swept shape where the body is now, counter-clockwise: each edge
@@ -264,26 +261,69 @@ impl Body {
     }
 }
 
-/// The nearest point of the polygon `poly` (world vertices) to `p`, and whether it is one of
-/// the vertices.
-pub fn nearest(poly: &[DVec2], p: DVec2) -> (DVec2, bool) {
+/// Where a point is against a polygon ([`near`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Near {
+    /// The nearest point of the polygon's outline...
+    pub y: DVec2,
+    /// ... the vertex it is, if it is one;
+    pub vertex: Option<usize>,
+    /// the signed distance to it (negative inside a polygon of three vertices or more)...
+    pub gap: f64,
+    /// ... along this unit normal, which points from the polygon to the point (outward).
+    pub normal: DVec2,
+}
+
+/// Where `p` is against the polygon `poly` (world vertices; one vertex: a point, two: a
+/// segment). A point inside a polygon is at a negative distance from its outline, with the
+/// normal pointing out through the nearest edge, so that a contact pushes it out, never on
+/// through.
+pub fn near(poly: &[DVec2], p: DVec2) -> Near {
     let n = poly.len();
-    if n == 1 {
-        return (poly[0], true);
-    }
-    let edges = if n == 2 { 1 } else { n };
-    let mut best = (poly[0], true, f64::INFINITY);
+    let edges = match n {
+        1 => 0,
+        2 => 1,
+        _ => n,
+    };
+    let (mut y, mut vertex, mut best, mut edge) = (poly[0], Some(0), (p - poly[0]).length_squared(), None);
     for k in 0..edges {
         let (a, b) = (poly[k], poly[(k + 1) % n]);
         let e = b - a;
         let t = ((p - a).dot(e) / e.length_squared()).clamp(0.0, 1.0);
-        let y = a + e * t;
-        let d2 = (p - y).length_squared();
-        if d2 < best.2 {
-            best = (y, t == 0.0 || t == 1.0, d2);
+        let at = a + e * t;
+        let d2 = (p - at).length_squared();
+        if d2 < best {
+            (y, best, edge) = (at, d2, Some(k));
+            vertex = if t == 0.0 {
+                Some(k)
+            } else if t == 1.0 {
+                Some((k + 1) % n)
+            } else {
+                None
+            };
         }
     }
-    (best.0, best.1)
+    let inside = n >= 3 && (0..n).all(|k| cross(poly[(k + 1) % n] - poly[k], p - poly[k]) >= 0.0);
+    let d = best.sqrt();
+    let normal = if d > 0.0 {
+        (p - y) / d
+    } else if let Some(k) = edge {
+        // On the outline: the edge's outward normal (counter-clockwise polygons).
+        let e = poly[(k + 1) % n] - poly[k];
+        DVec2::new(e.y, -e.x).normalize()
+    } else {
+        DVec2::ZERO
+    };
+    if inside {
+        Near {
+            y,
+            vertex,
+            gap: -d,
+            normal: if d > 0.0 { -normal } else { normal },
+        }
+    } else {
+        Near { y, vertex, gap: d, normal }
+    }
 }
 
 /// One side of a contact: its centre, velocity, spin and inverse inertias (0 for a side that
@@ -322,35 +362,38 @@ pub struct Touch {
     pub point: DVec2,
 }
 
-/// Evaluates the contact of a vertex `v` (sphero-radius `a_v`, on side `s`) with the nearest
-/// point `y` of the other side's polygon (sphero-radius `a_y`, side `o`), advancing `state`
-/// by dt; `None` apart (and the history cleared).
+/// Evaluates the contact of a vertex `v` (sphero-radius `a_v`, on side `s`) with the other
+/// side's polygon (sphero-radius `a_y`, side `o`), `gap` from it along the outward `normal`
+/// ([`near`]), advancing `state` by dt; `None` apart, or between two sides that neither
+/// yields (a fixed body on a wall: no dynamics, and no damping to derive), the history
+/// cleared. The force is on `s`.
 #[allow(clippy::too_many_arguments)]
 pub fn touch(
     law: &ContactParams,
     v: DVec2,
     a_v: f64,
     s: &Side,
-    y: DVec2,
+    normal: DVec2,
+    gap: f64,
     a_y: f64,
     o: &Side,
     scale: f64,
     dt: f64,
     state: &mut ContactState<DVec2>,
 ) -> Option<Touch> {
-    let d = (v - y).length();
-    let overlap = a_v + a_y - d;
-    if (overlap <= 0.0 && !state.bonded) || d == 0.0 {
+    let overlap = a_v + a_y - gap;
+    let point = v - normal * (a_v - 0.5 * overlap);
+    let (rs, ro) = (point - s.x, point - o.x);
+    let inv = s.inv_mass + s.inv_inertia * cross(rs, normal).powi(2) + o.inv_mass + o.inv_inertia * cross(ro, normal).powi(2);
+    if (overlap <= 0.0 && !state.bonded) || normal == DVec2::ZERO || inv == 0.0 {
         *state = ContactState::default();
         return None;
     }
-    let n = (v - y) / d;
-    let point = v - n * (a_v - 0.5 * overlap);
-    let (rs, ro) = (point - s.x, point - o.x);
     let v_rel = (s.v + spin_cross(s.omega, rs)) - (o.v + spin_cross(o.omega, ro));
-    let inv = s.inv_mass + s.inv_inertia * cross(rs, n).powi(2) + o.inv_mass + o.inv_inertia * cross(ro, n).powi(2);
-    let gamma = law.gamma(law.damping_factor(), 1.0 / inv) * scale;
-    let c = contact_force::<D2>(law, overlap, n, v_rel, gamma, scale, dt, state);
+    // A hybrid grain's mass is scaled by 1 − w already; the grains' law scales the damping of
+    // the unscaled mass by it, √(s m) √s = s √m.
+    let gamma = law.gamma(law.damping_factor(), 1.0 / inv) * scale.sqrt();
+    let c = contact_force::<D2>(law, overlap, normal, v_rel, gamma, scale, dt, state);
     c.active.then_some(Touch { force: c.force, point })
 }
 
@@ -404,8 +447,13 @@ pub fn forces(
             }
             for (s, o, first) in [(i, j, true), (j, i, false)] {
                 for (k, &v) in polys[s].iter().enumerate() {
-                    let (y, at_vertex) = nearest(&polys[o], v);
-                    if !first && at_vertex {
+                    let at = near(&polys[o], v);
+                    // A vertex–vertex touch once: in the first pass, and only between two
+                    // vertices each nearest to the other (else the other's vertex touches
+                    // this body's edge, and the second pass has it).
+                    if let Some(w) = at.vertex
+                        && (!first || near(&polys[s], polys[o][w]).vertex != Some(k))
+                    {
                         continue;
                     }
                     let key = Key::Bodies {
@@ -415,7 +463,7 @@ pub fn forces(
                     };
                     let mut state = history(&key);
                     let (a_s, a_o) = (bodies[s].radius, bodies[o].radius);
-                    if let Some(t) = touch(&law, v, a_s, &sides[s], y, a_o, &sides[o], 1.0, dt, &mut state) {
+                    if let Some(t) = touch(&law, v, a_s, &sides[s], at.normal, at.gap, a_o, &sides[o], 1.0, dt, &mut state) {
                         apply(&mut load, s, t.force, t.point);
                         apply(&mut load, o, -t.force, t.point);
                         list.push((key, state));
@@ -438,7 +486,7 @@ pub fn forces(
                 inv_inertia: 0.0,
             };
             let a = bodies[i].radius;
-            let at = |load: &mut Vec<(DVec2, f64)>, list: &mut Vec<_>, k: u32, v: DVec2, y: DVec2, o: Side, mine: bool| {
+            let at = |load: &mut Vec<(DVec2, f64)>, list: &mut Vec<_>, k: u32, v: DVec2, normal: DVec2, gap: f64, o: Side, mine: bool| {
                 let key = Key::Wall {
                     body: bodies[i].id,
                     vertex: k,
@@ -448,9 +496,9 @@ pub fn forces(
                 // The body's vertex on the wall, or the wall's end (a vertex of radius 0) on
                 // the body.
                 let t = if mine {
-                    touch(&law, v, a, &sides[i], y, 0.0, &o, 1.0, dt, &mut state).map(|t| (t.force, t.point))
+                    touch(&law, v, a, &sides[i], normal, gap, 0.0, &o, 1.0, dt, &mut state).map(|t| (t.force, t.point))
                 } else {
-                    touch(&law, v, 0.0, &o, y, a, &sides[i], 1.0, dt, &mut state).map(|t| (-t.force, t.point))
+                    touch(&law, v, 0.0, &o, normal, gap, a, &sides[i], 1.0, dt, &mut state).map(|t| (-t.force, t.point))
                 };
                 if let Some((f, p)) = t {
                     apply(load, i, f, p);
@@ -459,9 +507,10 @@ pub fn forces(
             };
             match wall.shape {
                 WallShape::Plane { point, normal } => {
+                    // Signed: a vertex pushed past the plane is pushed back, not through.
                     for (k, &v) in polys[i].iter().enumerate() {
                         let gap = (v - point).dot(normal);
-                        at(&mut load, &mut list, k as u32, v, v - normal * gap, wall_side(point, 0.0), true);
+                        at(&mut load, &mut list, k as u32, v, normal, gap, wall_side(point, 0.0), true);
                     }
                 }
                 WallShape::Drum { center, radius } => {
@@ -469,29 +518,23 @@ pub fn forces(
                         let r = v - center;
                         let len = r.length();
                         if len > 0.0 {
-                            at(
-                                &mut load,
-                                &mut list,
-                                k as u32,
-                                v,
-                                center + r * (radius / len),
-                                wall_side(center, wall.spin),
-                                true,
-                            );
+                            let (normal, gap) = (-r / len, radius - len);
+                            at(&mut load, &mut list, k as u32, v, normal, gap, wall_side(center, wall.spin), true);
                         }
                     }
                 }
                 WallShape::Segment { a: p, b: q } => {
                     let seg = [p, q];
                     for (k, &v) in polys[i].iter().enumerate() {
-                        let (y, _) = nearest(&seg, v);
-                        at(&mut load, &mut list, k as u32, v, y, wall_side(p, 0.0), true);
+                        let on = near(&seg, v);
+                        at(&mut load, &mut list, k as u32, v, on.normal, on.gap, wall_side(p, 0.0), true);
                     }
+                    // The segment's ends against the body's edges (on its vertices: above).
                     for (e, &end) in seg.iter().enumerate() {
-                        let (y, at_vertex) = nearest(&polys[i], end);
-                        if !at_vertex {
+                        let on = near(&polys[i], end);
+                        if on.vertex.is_none() {
                             let k = u32::MAX - e as u32;
-                            at(&mut load, &mut list, k, end, y, wall_side(p, 0.0), false);
+                            at(&mut load, &mut list, k, end, on.normal, on.gap, wall_side(p, 0.0), false);
                         }
                     }
                 }
@@ -531,7 +574,7 @@ fn disk_contacts(
         if (disk.x - body.x).length_squared() > reach * reach {
             continue;
         }
-        let (y, _) = nearest(poly, disk.x);
+        let at = near(poly, disk.x);
         let k = key(disk.id, body.id);
         let mut state = history(&k);
         let s = Side {
@@ -541,7 +584,19 @@ fn disk_contacts(
             inv_mass: disk.inv_mass,
             inv_inertia: 0.0,
         };
-        if let Some(t) = touch(law, disk.x, disk.radius, &s, y, body.radius, side, disk.scale, dt, &mut state) {
+        if let Some(t) = touch(
+            law,
+            disk.x,
+            disk.radius,
+            &s,
+            at.normal,
+            at.gap,
+            body.radius,
+            side,
+            disk.scale,
+            dt,
+            &mut state,
+        ) {
             load[i].0 -= t.force;
             load[i].1 -= cross(t.point - side.x, t.force);
             out.push((disk.index, t.force, cross(t.point - disk.x, t.force)));
@@ -604,6 +659,7 @@ pub fn half_kick(bodies: &mut [Body], gravity: DVec2, h: f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::state::Wall;
     use std::f64::consts::PI;
 
     /// Exact mass properties against closed forms: a disk (one vertex), a stadium (two), a
@@ -676,12 +732,88 @@ mod tests {
         }
     }
 
+    /// The nearest point and vertex, and the signed distance with its outward normal: outside
+    /// off an edge and off a corner, inside (negative, out through the nearest edge), and of a
+    /// point and a segment.
     #[test]
-    fn the_nearest_point_is_on_an_edge_or_a_corner() {
+    fn near_finds_the_nearest_point_and_the_side() {
         let sq = [DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y];
-        assert_eq!(nearest(&sq, DVec2::new(0.5, -0.2)), (DVec2::new(0.5, 0.0), false));
-        assert_eq!(nearest(&sq, DVec2::new(1.5, 1.5)), (DVec2::ONE, true));
-        assert_eq!(nearest(&sq[..1], DVec2::new(5.0, 1.0)), (DVec2::ZERO, true));
-        assert_eq!(nearest(&sq[..2], DVec2::new(0.25, 1.0)), (DVec2::new(0.25, 0.0), false));
+        let at = near(&sq, DVec2::new(0.5, -0.2));
+        assert_eq!((at.y, at.vertex, at.normal), (DVec2::new(0.5, 0.0), None, -DVec2::Y));
+        assert!((at.gap - 0.2).abs() < 1e-15);
+        let at = near(&sq, DVec2::new(1.5, 1.5));
+        assert_eq!((at.y, at.vertex), (DVec2::ONE, Some(2)));
+        assert!((at.gap - 0.5f64.sqrt()).abs() < 1e-15 && (at.normal - DVec2::ONE.normalize()).length() < 1e-15);
+        let at = near(&sq, DVec2::new(0.5, 0.1));
+        assert_eq!((at.y, at.vertex, at.normal), (DVec2::new(0.5, 0.0), None, -DVec2::Y));
+        assert!((at.gap + 0.1).abs() < 1e-15, "inside: {}", at.gap);
+        let at = near(&sq[..1], DVec2::new(3.0, 4.0));
+        assert_eq!((at.y, at.vertex, at.gap), (DVec2::ZERO, Some(0), 5.0));
+        let at = near(&sq[..2], DVec2::new(0.25, -1.0));
+        assert_eq!((at.y, at.vertex, at.gap, at.normal), (DVec2::new(0.25, 0.0), None, 1.0, -DVec2::Y));
+    }
+
+    fn floor_law() -> ContactParams {
+        ContactParams {
+            stiffness_normal: 1e5,
+            stiffness_tangential: 5e4,
+            damping: crate::contact::Damping::Restitution(0.5),
+            friction: 0.5,
+            cohesion_normal: 0.0,
+            cohesion_tangential: 0.0,
+            damping_scale: 1.0,
+        }
+    }
+
+    fn unit_square(c: DVec2, s: f64) -> Vec<DVec2> {
+        let h = 0.5 * s;
+        vec![
+            c + DVec2::new(-h, -h),
+            c + DVec2::new(h, -h),
+            c + DVec2::new(h, h),
+            c + DVec2::new(-h, h),
+        ]
+    }
+
+    /// A body pushed past a plane by more than its radius, or a disk body whose centre is
+    /// inside another's polygon, is pushed back out (the signed distance), never on through;
+    /// a fixed body on a wall gets no force (nothing yields: no dynamics, no damping).
+    #[test]
+    fn deep_overlaps_push_back_out() {
+        let a = 0.01;
+        let floor = [Wall::<D2>::plane(DVec2::ZERO, DVec2::Y, 0.5)];
+        let mut sunk = [Body::new(0, &unit_square(DVec2::new(0.0, 0.4), 1.0), a, 1.0, 0, Motion::Free)];
+        forces(&mut sunk, &[], &floor, &[floor_law()], 0.0, &mut BodyContacts::default());
+        assert!(sunk[0].force.y > 0.0 && sunk[0].force.x.abs() < 1e-9, "{:?}", sunk[0].force);
+        // The disk's centre 0.1 inside the square's right edge: pushed out along +x.
+        let mut pair = [
+            Body::new(0, &unit_square(DVec2::ZERO, 1.0), a, 1.0, 0, Motion::Fixed),
+            Body::new(1, &[DVec2::new(0.4, 0.0)], 0.05, 1.0, 0, Motion::Free),
+        ];
+        forces(&mut pair, &[], &[], &[floor_law()], 0.0, &mut BodyContacts::default());
+        assert!(pair[1].force.x > 0.0 && pair[1].force.y.abs() < 1e-9, "{:?}", pair[1].force);
+        let mut fixed = [Body::new(0, &unit_square(DVec2::new(0.0, 0.4), 1.0), a, 1.0, 0, Motion::Fixed)];
+        let mut contacts = BodyContacts::default();
+        forces(&mut fixed, &[], &floor, &[floor_law()], 0.0, &mut contacts);
+        assert!(fixed[0].force == DVec2::ZERO && contacts.list.is_empty());
+    }
+
+    /// A disk body beside a square's corner (its nearest point on the square on the edge, the
+    /// corner within its reach too) is one contact whichever body comes first, with the same
+    /// force: the corner–disk touch is the disk's with the edge, not a second one.
+    #[test]
+    fn a_corner_touch_is_one_contact_in_either_order() {
+        let sq = Body::new(0, &unit_square(DVec2::ZERO, 1.0), 0.01, 1.0, 0, Motion::Free);
+        let disk = Body::new(1, &[DVec2::new(0.55, 0.45)], 0.1, 1.0, 0, Motion::Free);
+        let mut results = Vec::new();
+        for mut bodies in [vec![sq.clone(), disk.clone()], vec![disk.clone(), sq.clone()]] {
+            let mut contacts = BodyContacts::default();
+            forces(&mut bodies, &[], &[], &[floor_law()], 0.0, &mut contacts);
+            let on_disk = bodies.iter().find(|b| b.id == 1).unwrap().force;
+            results.push((contacts.list.len(), on_disk));
+        }
+        assert_eq!(results[0].0, 1, "one contact: {results:?}");
+        assert_eq!(results[0], results[1]);
+        assert!(results[0].1.x > 0.0 && results[0].1.y.abs() < 1e-12 * results[0].1.x, "{results:?}");
     }
 }

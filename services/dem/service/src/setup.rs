@@ -59,6 +59,24 @@ pub fn stable_step(scene: &Scene) -> Option<(f64, f64, f64, &DemMaterial, &str)>
             best = Some((SAFE_FRACTION * critical, critical, m_min, dem, &mat.name));
         }
     }
+    // A grain against a rigid body takes the body's law: with the lightest grain.
+    let lightest = scene
+        .bodies
+        .iter()
+        .filter(|b| matches!(b.model, Model::Dem | Model::Hybrid))
+        .filter_map(|b| {
+            let mat = &scene.materials[b.material];
+            mat.dem.as_ref().map(|dem| grain_mass(scene.dim(), min_radius(dem), mat.density))
+        })
+        .fold(f64::INFINITY, f64::min);
+    for r in scene.rigids.iter().filter(|_| lightest.is_finite()) {
+        let mat = &scene.materials[r.material];
+        let Some(dem) = &mat.dem else { continue };
+        let critical = critical_time_step(&contact_params(dem), lightest);
+        if best.is_none_or(|b| SAFE_FRACTION * critical < b.0) {
+            best = Some((SAFE_FRACTION * critical, critical, lightest, dem, &mat.name));
+        }
+    }
     // A free rigid body: its effective mass at its farthest point, 1 / (1/m + R²/I), over 4
     // (two faces flush touch with up to four vertex springs at once).
     for r in scene

@@ -117,8 +117,21 @@ impl<S: Space> DemSolver<S> {
                 self.state.time
             );
         }
+        if let Some(b) = self
+            .state
+            .bodies
+            .iter()
+            .find(|b| !(b.x.is_finite() && b.v.is_finite() && b.angle.is_finite() && b.omega.is_finite()))
+        {
+            bail!(
+                "DEM step {step} (t = {:.6e} s): rigid body {} has a non-finite position or velocity; likely cause: a time step too large for the \
+                 stiffness and the body's effective mass (DEM step {dt:.3e} s), or a body created overlapping",
+                self.state.time,
+                b.id
+            );
+        }
         let ke = DemPipeline::kinetic_energy(&self.state);
-        if ke > self.energy_bound {
+        if ke.is_nan() || ke > self.energy_bound {
             bail!(
                 "DEM step {step} (t = {:.6e} s): kinetic energy {ke:.4e} J exceeds {:.4e} J, far more than gravity and the walls can supply \
                  (runaway); likely cause: a time step too large for the stiffness (DEM step {dt:.3e} s), or grains created overlapping",
