@@ -194,46 +194,52 @@ fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
     assert!(kept[1] < kept[0], "the soft disk gives less: {kept:?}");
 }
 
+/// An elastic block (40 × 20 mm, K = 6 MPa, G = 3.5 MPa, ρ = 2500, PIC) standing on a fixed
+/// rigid slab (a = 0.5 mm) from x = −0.05 to `length` under gravity, on a grid of cell h
+/// reaching `reach` in x; its lowest points just touching (r_p = h/4, half the points'
+/// spacing). Friction μ between them.
+fn block_on_slab(h: f64, length: f64, reach: f64, mu: f64) -> Run {
+    let (rho, g, a) = (2500.0, DVec2::new(0.0, -9.81), 0.0005);
+    let r_p = 0.25 * h;
+    let floor = a + r_p;
+    let mut pts = fill(
+        Region::Box {
+            min: [-0.02, floor, 0.0],
+            max: [0.02, floor + 0.02, 0.0],
+        },
+        h,
+        rho,
+    );
+    // The lattice starts at the origin: shift the block down so its lowest points touch.
+    let low = pts.x.iter().map(|x| x.y).fold(f64::INFINITY, f64::min);
+    pts.x.iter_mut().for_each(|x| x.y -= low - floor);
+    let slab = vec![
+        DVec2::new(-0.05, -0.01),
+        DVec2::new(length, -0.01),
+        DVec2::new(length, 0.0),
+        DVec2::new(-0.05, 0.0),
+    ];
+    let params = MpmParams {
+        grid: Grid::covering([-0.04, -0.02, 0.0], [reach, 0.05, 0.0], h, 2),
+        kernel: Kernel::Gimp { half_width: 0.25 * h },
+        model: elastic(6e6, 3.5e6),
+        gravity: g,
+        transfer: Transfer::Flip(0.0),
+        domain_walls: None,
+        walls: Vec::new(),
+    };
+    let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);
+    run(law(1e6, 0.3, mu), g, vec![slab], pts, params, r_p)
+}
+
 /// Jiang 2020 §5.2.1: an elastic MPM block resting on a fixed rigid slab under gravity. The
 /// contact forces on its points add up to its weight within 1% for every grid size: the
 /// force does not depend on the grid (the paper's point), as statics says.
 #[test]
 fn a_block_resting_on_a_rigid_slab_weighs_its_weight_on_every_grid() {
-    let (rho, g) = (2500.0, DVec2::new(0.0, -9.81));
-    let a = 0.0005;
     for h in [0.002, 0.0025, 0.003, 0.004] {
-        let r_p = 0.25 * h;
-        let floor = a + r_p;
-        let pts = fill(
-            Region::Box {
-                min: [-0.02, floor, 0.0],
-                max: [0.02, floor + 0.02, 0.0],
-            },
-            h,
-            rho,
-        );
-        // The lattice starts at the origin: shift the block down so its lowest points touch.
-        let low = pts.x.iter().map(|x| x.y).fold(f64::INFINITY, f64::min);
-        let mut pts = pts;
-        pts.x.iter_mut().for_each(|x| x.y -= low - floor);
-        let weight = pts.mass.iter().sum::<f64>() * 9.81;
-        let slab = vec![
-            DVec2::new(-0.05, -0.01),
-            DVec2::new(0.05, -0.01),
-            DVec2::new(0.05, 0.0),
-            DVec2::new(-0.05, 0.0),
-        ];
-        let params = MpmParams {
-            grid: Grid::covering([-0.04, -0.02, 0.0], [0.04, 0.05, 0.0], h, 2),
-            kernel: Kernel::Gimp { half_width: 0.25 * h },
-            model: elastic(6e6, 3.5e6),
-            gravity: g,
-            transfer: Transfer::Flip(0.0),
-            domain_walls: None,
-            walls: Vec::new(),
-        };
-        let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);
-        let mut r = run(law(1e6, 0.3, 0.5), g, vec![slab], pts, params, r_p);
+        let mut r = block_on_slab(h, 0.05, 0.04, 0.5);
+        let weight = r.pts.mass.iter().sum::<f64>() * 9.81;
         let dt = 1e-5;
         let mut f = Vec::new();
         for _ in 0..10_000 {
@@ -261,39 +267,10 @@ fn a_block_resting_on_a_rigid_slab_weighs_its_weight_on_every_grid() {
 /// μ g as a rigid block would (Coulomb), on two grids.
 #[test]
 fn a_block_sliding_on_a_rigid_slab_feels_mu_n() {
-    let (rho, g, mu, v0) = (2500.0, DVec2::new(0.0, -9.81), 0.3, 2.0);
-    let a = 0.0005;
+    let (mu, v0) = (0.3, 2.0);
     for h in [0.002, 0.004] {
-        let r_p = 0.25 * h;
-        let floor = a + r_p;
-        let mut pts = fill(
-            Region::Box {
-                min: [-0.02, floor, 0.0],
-                max: [0.02, floor + 0.02, 0.0],
-            },
-            h,
-            rho,
-        );
-        let low = pts.x.iter().map(|x| x.y).fold(f64::INFINITY, f64::min);
-        pts.x.iter_mut().for_each(|x| x.y -= low - floor);
-        let m: f64 = pts.mass.iter().sum();
-        let slab = vec![
-            DVec2::new(-0.05, -0.01),
-            DVec2::new(0.4, -0.01),
-            DVec2::new(0.4, 0.0),
-            DVec2::new(-0.05, 0.0),
-        ];
-        let params = MpmParams {
-            grid: Grid::covering([-0.04, -0.02, 0.0], [0.3, 0.05, 0.0], h, 2),
-            kernel: Kernel::Gimp { half_width: 0.25 * h },
-            model: elastic(6e6, 3.5e6),
-            gravity: g,
-            transfer: Transfer::Flip(0.0),
-            domain_walls: None,
-            walls: Vec::new(),
-        };
-        let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);
-        let mut r = run(law(1e6, 0.3, mu), g, vec![slab], pts, params, r_p);
+        let mut r = block_on_slab(h, 0.4, 0.3, mu);
+        let m: f64 = r.pts.mass.iter().sum();
         let dt = 1e-5;
         // Settle on the slab at rest first (0.05 s), then slide.
         for _ in 0..5_000 {
