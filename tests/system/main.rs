@@ -693,6 +693,19 @@ fn a_fixed_rigid_floor_carries_the_weight_of_the_grains_and_the_free_body_on_it(
     let scene = grains_protocol::scene::load(&dir.join("scene.toml")).unwrap();
     let square: Vec<glam::DVec2> = scene.rigids[1].vertices.iter().map(|&[x, y]| glam::DVec2::new(x, y)).collect();
     let square_weight = grains_dem::bodies::mass_properties(&square, scene.rigids[1].radius).area * 2530.0 * 9.81;
+    // `grains check` says what the shapes give: the square's mass, (4² + 4·4·0.5 + π 0.5²) mm²
+    // of glass = 6.2707e-2 kg/m.
+    let check = std::process::Command::new(bin("grains"))
+        .args(["check", "tests/scenes/rigid_floor_2d.toml"])
+        .current_dir(repo())
+        .output()
+        .expect("grains check");
+    let said = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success(), "{said}");
+    assert!(
+        said.contains("rigid.1: free, 4 vertices swept by 0.0005 m: mass 6.2707e-2 kg/m"),
+        "{said}"
+    );
     let total = grain_weight + square_weight;
     assert!(
         (-force[1] - total).abs() < 0.01 * total,

@@ -170,6 +170,24 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
         s.dt,
         roles.join(", ")
     );
+    // Rigid bodies: what the shape gives (a typo in a vertex shows as a mass far off).
+    for (k, r) in s.rigids.iter().enumerate() {
+        use grains_dem::space::{D2, Space};
+        let vertices: Vec<_> = r.vertices.iter().map(|&[x, y]| D2::from_array([x, y, 0.0])).collect();
+        let props = grains_dem::bodies::mass_properties(&vertices, r.radius);
+        let rho = s.materials[r.material].density;
+        println!(
+            "{}: rigid.{k}: {}, {} vertices swept by {} m: mass {:.4e} kg/m, moment of inertia {:.4e} kg m, centre of mass ({:.6}, {:.6}) m",
+            path.display(),
+            format!("{:?}", r.motion).to_lowercase(),
+            r.vertices.len(),
+            r.radius,
+            rho * props.area,
+            rho * props.second_moment,
+            props.centroid.x,
+            props.centroid.y
+        );
+    }
     if let Some(n) = crate::cost::counts(&s, &text)? {
         let (hybrid, dem) = crate::cost::predict(&crate::cost::MEASURED, &n);
         println!(
