@@ -569,8 +569,10 @@ fn disk_contacts(
     load: &mut [(DVec2, f64)],
 ) -> Vec<(usize, DVec2, f64)> {
     let mut out = Vec::new();
+    // Once per body, not per disk: it scans the shape.
+    let body_reach = body.reach();
     for disk in disks {
-        let reach = body.reach() + disk.radius;
+        let reach = body_reach + disk.radius;
         if (disk.x - body.x).length_squared() > reach * reach {
             continue;
         }

@@ -65,6 +65,17 @@ fn diamond(c: DVec2, s: f64) -> Vec<DVec2> {
     ]
 }
 
+/// A fixed slab 100 × 10 mm under y = 0, swept by `a`.
+fn slab(id: u64, a: f64) -> Body {
+    let corners = [
+        DVec2::new(-0.05, -0.01),
+        DVec2::new(0.05, -0.01),
+        DVec2::new(0.05, 0.0),
+        DVec2::new(-0.05, 0.0),
+    ];
+    Body::new(id, &corners, a, DENSITY, 0, Motion::Fixed)
+}
+
 fn run(st: &mut DemState<D2>, dt: f64, seconds: f64) {
     let mut p = DemPipeline::<D2>::new(1).unwrap();
     p.run(st, dt, (seconds / dt).round() as usize);
@@ -155,15 +166,7 @@ fn a_square_at_rest_on_a_floor_weighs_its_weight() {
         let weight = sq.mass * 9.81;
         let (bodies, walls) = match floor {
             "plane" => (vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, 0.5)]),
-            "body" => {
-                let slab = vec![
-                    DVec2::new(-0.05, -0.01),
-                    DVec2::new(0.05, -0.01),
-                    DVec2::new(0.05, 0.0),
-                    DVec2::new(-0.05, 0.0),
-                ];
-                (vec![sq, Body::new(1, &slab, 0.0, DENSITY, 0, Motion::Fixed)], Vec::new())
-            }
+            "body" => (vec![sq, slab(1, 0.0)], Vec::new()),
             "segment" => (vec![sq], vec![Wall::segment(DVec2::new(-0.05, 0.0), DVec2::new(0.05, 0.0), 0.5)]),
             // A drum of 1 m: its bottom is flat to 12 µm across the square.
             _ => (vec![sq], vec![Wall::drum(DVec2::new(0.0, 1.0), 1.0, 0.5)]),
@@ -217,18 +220,7 @@ fn friction_holds_below_the_slip_limit_and_is_mu_n_at_it() {
 #[test]
 fn a_grain_rests_on_a_fixed_body() {
     let g = DVec2::new(0.0, -9.81);
-    let slab = vec![
-        DVec2::new(-0.05, -0.01),
-        DVec2::new(0.05, -0.01),
-        DVec2::new(0.05, 0.0),
-        DVec2::new(-0.05, 0.0),
-    ];
-    let mut st = state(
-        law(0.3, 0.5),
-        g,
-        vec![Body::new(0, &slab, 0.0005, DENSITY, 0, Motion::Fixed)],
-        Vec::new(),
-    );
+    let mut st = state(law(0.3, 0.5), g, vec![slab(0, 0.0005)], Vec::new());
     let r = 0.001;
     let m = Grains::<D2>::mass_of(r, DENSITY);
     st.grains.push(7, DVec2::new(0.003, 0.0005 + r + 2e-4), r, m, 0);
@@ -257,18 +249,7 @@ fn an_oblique_impact_with_friction_spins_the_body_by_the_friction_impulse() {
     let (r, e, mu) = (0.005, 1.0, 0.1);
     let mut disk = Body::new(0, &[DVec2::new(0.0, r + 1e-4)], r, DENSITY, 0, Motion::Free);
     disk.v = DVec2::new(1.0, -1.0);
-    let slab = vec![
-        DVec2::new(-0.05, -0.01),
-        DVec2::new(0.05, -0.01),
-        DVec2::new(0.05, 0.0),
-        DVec2::new(-0.05, 0.0),
-    ];
-    let mut st = state(
-        law(e, mu),
-        DVec2::ZERO,
-        vec![disk, Body::new(1, &slab, 1e-4, DENSITY, 0, Motion::Fixed)],
-        Vec::new(),
-    );
+    let mut st = state(law(e, mu), DVec2::ZERO, vec![disk, slab(1, 1e-4)], Vec::new());
     run(&mut st, 1e-7, 0.002);
     let b = &st.bodies[0];
     let (m, inertia) = (b.mass, b.inertia);
