@@ -187,6 +187,31 @@ pub const MPM_EPOCH: ServiceSpec = ServiceSpec {
     buffer: 2,
     overflow: false,
 };
+/// DEM → MPM: the rigid bodies' reach at the start of each step (scenes with rigid bodies
+/// and a continuum).
+pub const BODY_REACH: ServiceSpec = ServiceSpec {
+    name: "grains/dem/body_reach",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
+/// MPM → DEM: the material points within the bodies' reach.
+pub const CONTACT_POINTS: ServiceSpec = ServiceSpec {
+    name: "grains/mpm/contact_points",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
+/// DEM → MPM: the bodies' contact force on each of those points for the step.
+pub const POINT_FORCES: ServiceSpec = ServiceSpec {
+    name: "grains/dem/point_forces",
+    max_publishers: 1,
+    max_subscribers: 1,
+    buffer: 2,
+    overflow: false,
+};
 
 /// A service and its quality of service. Every participant opens a service with exactly
 /// these limits (iceoryx2 refuses an opener whose limits exceed the creator's).
@@ -203,7 +228,7 @@ pub struct ServiceSpec {
 }
 
 /// Every service of a run, for the spec and for cleanup.
-pub const ALL: [ServiceSpec; 21] = [
+pub const ALL: [ServiceSpec; 24] = [
     HELLO,
     WELCOME,
     CONTROL,
@@ -225,6 +250,9 @@ pub const ALL: [ServiceSpec; 21] = [
     DEM_EPOCH,
     DEM_STRESS,
     MPM_EPOCH,
+    BODY_REACH,
+    CONTACT_POINTS,
+    POINT_FORCES,
 ];
 
 /// Node name of a participant in the iceoryx2 node list (`grains-dem`, …): what a survivor

@@ -451,6 +451,53 @@ wire_type! {
     }
 }
 
+wire_type! {
+    /// A rigid body's reach (DEM → MPM at the start of every step of a scene with rigid bodies
+    /// and a continuum, Jiang 2020 §4): no part of the body is farther than `reach` from
+    /// `center`. 40 bytes.
+    "grains.BodyReach.v1",
+    pub struct BodyReach {
+        pub id: u64,
+        /// [m]; the third component is 0 in 2D.
+        pub center: [f64; 3],
+        /// [m]
+        pub reach: f64,
+    }
+}
+
+wire_type! {
+    /// A material point within a body's reach plus its contact radius (MPM → DEM, Jiang 2020
+    /// §4: an "identified material point", a disk of radius `radius` to the body's contact
+    /// law). 80 bytes, sorted by `index`.
+    "grains.ContactPoint.v1",
+    pub struct ContactPoint {
+        /// The point's index in the sender's arrays this step: [`PointForce::index`] echoes it.
+        pub index: u64,
+        /// The point's id (stable over the run: the contact's history is kept by it).
+        pub id: u64,
+        /// [m]
+        pub position: [f64; 3],
+        /// [m/s]
+        pub velocity: [f64; 3],
+        /// [kg] (2D: per metre); the point's full mass.
+        pub mass: f64,
+        /// Contact radius r_p [m] (Jiang 2020 eq. 44–45).
+        pub radius: f64,
+    }
+}
+
+wire_type! {
+    /// The bodies' contact force on one material point over the coming step (DEM → MPM,
+    /// Jiang 2020 eq. 46–48); its reaction acts on the bodies. 32 bytes, sorted by `index`.
+    "grains.PointForce.v1",
+    pub struct PointForce {
+        /// [`ContactPoint::index`] of the point.
+        pub index: u64,
+        /// [N] (2D: N per metre); the third component is 0 in 2D.
+        pub force: [f64; 3],
+    }
+}
+
 /// [`Ack::status`] codes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]

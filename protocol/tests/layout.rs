@@ -38,6 +38,9 @@ fn wire_layouts_match_the_spec() {
     check_layout!(Control, size 24, seq @ 0, command @ 8, key @ 12, value @ 16);
     check_layout!(ViewPoint, size 72, id @ 0, position @ 8, velocity @ 32, size @ 56, pressure @ 64);
     check_layout!(Ack, size 32, seq @ 0, step @ 8, command @ 16, status @ 20, key @ 24, _pad @ 28);
+    check_layout!(BodyReach, size 40, id @ 0, center @ 8, reach @ 32);
+    check_layout!(ContactPoint, size 80, index @ 0, id @ 8, position @ 16, velocity @ 40, mass @ 64, radius @ 72);
+    check_layout!(PointForce, size 32, index @ 0, force @ 8);
 }
 
 #[test]

@@ -734,6 +734,73 @@ fn a_fixed_rigid_floor_carries_the_weight_of_the_grains_and_the_free_body_on_it(
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// Rigid bodies in contact with a continuum through a real run (Jiang 2020 §4,
+/// `tests/scenes/mpm_on_rigid_2d.toml`): MPM sand in a box on a fixed rigid slab with a free
+/// rigid square on top. The DEM owns the contacts; the points within reach cross to it and
+/// their forces come back each step. At rest (statics) the slab carries the weight of the sand
+/// and the square and the square's contacts its weight (1%); the run starts no oracle, and
+/// threads (`--transport inproc`) give the same physics, frames and bodies.csv byte for byte.
+#[test]
+fn rigid_bodies_carry_a_continuum_by_contact_and_threads_give_the_same_bytes() {
+    let _machine = machine();
+    let out = out_dir("mpm-rigid");
+    let scene_path = "tests/scenes/mpm_on_rigid_2d.toml";
+    let (status, err) = run_to_end(&["run", scene_path, "--out", out.to_str().unwrap(), "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    assert!(err.contains("grains-coupler") && !err.contains("grains-oracle"), "{err}");
+    let scene = grains_protocol::scene::load(&dir.join("scene.toml")).unwrap();
+    let points = grains_service::vtu::Frame::read(&dir.join(format!("frames/points_{:08}.vtu", scene.steps))).unwrap();
+    let sand = points.array("mass").expect("point masses").iter().sum::<f64>() * 9.81;
+    let square: Vec<glam::DVec2> = scene.rigids[1].vertices.iter().map(|&[x, y]| glam::DVec2::new(x, y)).collect();
+    let square_weight = grains_dem::bodies::mass_properties(&square, scene.rigids[1].radius).area * 2500.0 * 9.81;
+    let bodies = std::fs::read_to_string(dir.join("bodies.csv")).unwrap();
+    let header: Vec<&str> = bodies.lines().next().unwrap().split(',').collect();
+    let last: Vec<f64> = bodies.lines().last().unwrap().split(',').map(|v| v.parse().unwrap()).collect();
+    let col = |name: &str| last[header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"))];
+    let total = sand + square_weight;
+    assert!(
+        (-col("body0_fy") - total).abs() < 0.01 * total,
+        "the slab carries {} N, the weight above it is {total} N (sand {sand}, square {square_weight})",
+        -col("body0_fy")
+    );
+    assert!(
+        (col("body1_fy") - square_weight).abs() < 0.01 * square_weight,
+        "the square's contacts with the points {} N vs its weight {square_weight} N",
+        col("body1_fy")
+    );
+    assert!(col("body1_vx").hypot(col("body1_vy")) < 1e-4, "the square rests");
+
+    let (status, err) = run_to_end(&[
+        "run",
+        scene_path,
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--transport",
+        "inproc",
+    ]);
+    assert!(status.success(), "{err}");
+    let threads = run_dir(&err);
+    let same = |name: &str| std::fs::read(dir.join(name)).unwrap() == std::fs::read(threads.join(name)).unwrap();
+    assert!(same("bodies.csv"), "bodies.csv differs between processes and threads");
+    for f in std::fs::read_dir(dir.join("frames")).unwrap().flatten() {
+        let name = format!("frames/{}", f.file_name().to_string_lossy());
+        assert!(same(&name), "{name} differs between processes and threads");
+    }
+    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
+    assert_eq!(read(&dir), read(&threads));
+
+    // A macro-step the points' contacts cannot resolve is refused before anything starts
+    // (eq. 51: 2π 0.1 √(1.5e-3 kg / 1e6 N/m) = 2.433e-5 s).
+    let (status, err) = run_to_end(&["run", scene_path, "--out", out.to_str().unwrap(), "--set", "run.dt=3e-5"]);
+    assert_eq!(status.code(), Some(2), "{err}");
+    for needle in ["run.dt", "eq. 51", "2.433e-5 s"] {
+        assert!(err.contains(needle), "expected {needle:?} in: {err}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
 #[test]
 fn a_time_step_above_the_stable_limit_is_refused_before_the_run() {
     let out = out_dir("unstable");

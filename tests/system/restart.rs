@@ -8,11 +8,12 @@ use std::path::Path;
 use std::time::Duration;
 
 /// The physics of a finished run: `metrics.csv` without its timings, every frame's bytes
-/// (by file name), and `walls.csv` if there is one.
+/// (by file name), and `walls.csv` and `bodies.csv` if there are.
 pub(crate) struct Outputs {
     metrics: String,
     frames: Vec<(String, Vec<u8>)>,
     walls: Option<String>,
+    bodies: Option<String>,
 }
 
 pub(crate) fn outputs(dir: &Path) -> Outputs {
@@ -27,6 +28,7 @@ pub(crate) fn outputs(dir: &Path) -> Outputs {
         metrics,
         frames,
         walls: std::fs::read_to_string(dir.join("walls.csv")).ok(),
+        bodies: std::fs::read_to_string(dir.join("bodies.csv")).ok(),
     }
 }
 
@@ -39,6 +41,7 @@ pub(crate) fn assert_same(resumed: &Outputs, whole: &Outputs, what: &str) {
         assert!(a == b, "{what}: frame {name} differs after the resume");
     }
     assert_eq!(resumed.walls, whole.walls, "{what}: walls.csv differs after the resume");
+    assert_eq!(resumed.bodies, whole.bodies, "{what}: bodies.csv differs after the resume");
 }
 
 fn refs(a: &[String]) -> Vec<&str> {
@@ -63,6 +66,9 @@ fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
         ("tests/scenes/hybrid_adaptive_2d.toml", "run.duration=0.05", 250, None),
         // Rigid bodies: their state and contact histories are in the DEM's checkpoint.
         ("tests/scenes/rigid_floor_2d.toml", "run.duration=0.15", 500, None),
+        // Rigid bodies and a continuum: the points' contact histories are the DEM's, their
+        // loads the MPM's for one step only.
+        ("tests/scenes/mpm_on_rigid_2d.toml", "run.duration=0.05", 1000, None),
     ];
     for (scene, steps, every, victim) in scenes {
         let every_s = every.to_string();

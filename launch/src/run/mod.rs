@@ -138,10 +138,15 @@ pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
             grains_mpm_service::check_scene(scene)?;
             grains_oracle_service::check_scene(scene)?;
         }
+        // Rigid bodies and a continuum, in contact.
+        [Role::Dem, Role::Mpm, Role::Coupler] => {
+            grains_dem_service::check_scene(scene)?;
+            grains_mpm_service::check_scene(scene)?;
+        }
         _ => {
             let list: Vec<_> = roles.iter().map(|r| r.name()).collect();
             bail!(BadInput(format!(
-                "{}: this scene needs {}; this build runs DEM-only, MPM-only and hybrid scenes",
+                "{}: this scene needs {}; this build runs DEM-only, MPM-only, hybrid and rigid-body–continuum scenes",
                 scene.path.display(),
                 list.join(", ")
             )));
@@ -186,6 +191,15 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
             rho * props.second_moment,
             props.centroid.x,
             props.centroid.y
+        );
+    }
+    if let Some((limit, k, m)) = grains_dem_service::setup::contact_step(&s) {
+        println!(
+            "{}: rigid bodies meet the material points by contact (r_p = {:.4e} m): macro-step {} s of at most {limit:.3e} s \
+             (Jiang 2020 eq. 51, k_n = {k:.4e} N/m, lightest point {m:.4e} kg)",
+            path.display(),
+            s.contact_radius(),
+            s.dt
         );
     }
     if let Some(n) = crate::cost::counts(&s, &text)? {

@@ -34,6 +34,9 @@ pub struct Coupling {
     /// rolling at a smaller one (early rather than late). 0 never turns
     /// the grains (Yue 2018 couples translation only); without gravity they always roll.
     pub quasi_static: f64,
+    /// Contact radius r_p of a material point against a rigid body [m] (Jiang 2020 eq. 44–45);
+    /// `None`: the middle of eq. 45's interval ([`super::Scene::contact_radius`]).
+    pub contact_radius: Option<f64>,
 }
 
 /// What `coupling.substeps = "auto"` asks for: the DEM step `dem_dt` (the DEM's own stable
@@ -82,6 +85,7 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
             hybrid_band: band_default,
             grain_transfer: GrainTransfer::Flip,
             quasi_static: 1e-3,
+            contact_radius: None,
         });
     };
     let (substeps, auto) = match &c.substeps {
@@ -148,6 +152,10 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
         quasi_static: match &c.quasi_static {
             None => 1e-3,
             Some(i) => in_range(ctx, i, "coupling.quasi_static", Closed(0.0), Bound::None)?,
+        },
+        contact_radius: match &c.contact_radius {
+            None => None,
+            Some(r) => Some(in_range(ctx, r, "coupling.contact_radius", Open(0.0), Bound::None)?),
         },
     })
 }

@@ -93,7 +93,8 @@ impl Scene {
             return s.participants.clone();
         }
         let has = |m: Model| self.bodies.iter().any(|b| b.model == m);
-        let dem = has(Model::Dem) || has(Model::Hybrid) || !self.rigids.is_empty();
+        let grains = has(Model::Dem) || has(Model::Hybrid);
+        let dem = grains || !self.rigids.is_empty();
         let mpm = has(Model::Mpm) || has(Model::Hybrid);
         let mut out = Vec::new();
         if dem {
@@ -105,8 +106,9 @@ impl Scene {
         if dem && mpm {
             out.push(Role::Coupler);
         }
-        // The oracle publishes the zone field of every coupled run, fixed or adaptive.
-        if dem && mpm {
+        // The oracle publishes the zone field of every run with grains and a continuum, fixed
+        // or adaptive (rigid bodies meet the continuum by contact, without zones).
+        if grains && mpm {
             out.push(Role::Oracle);
         }
         out
@@ -116,6 +118,32 @@ impl Scene {
     pub fn time_owner(&self) -> Role {
         let parts = self.participants();
         if parts.contains(&Role::Coupler) { Role::Coupler } else { parts[0] }
+    }
+
+    /// Whether rigid bodies meet a continuum by contact (Jiang 2020 §4): the DEM and the MPM
+    /// then exchange the bodies' reach, the points near them and their contact forces each
+    /// step (`protocol/README.md`).
+    pub fn contact_coupling(&self) -> bool {
+        !self.rigids.is_empty() && self.bodies.iter().any(|b| b.model == Model::Mpm)
+    }
+
+    /// The contact radius r_p of a material point against a rigid body [m]
+    /// (`coupling.contact_radius`, or by default the lower end of Jiang 2020 eq. 45's interval
+    /// h (1/√n, 1) with n points per cell: the point spacing, as the paper's own runs take
+    /// it, r_p = 0.1 cm in 0.3-cm cells).
+    pub fn contact_radius(&self) -> f64 {
+        self.coupling.contact_radius.unwrap_or(contact_radius_bounds(self)[0])
+    }
+
+    /// The mass of the lightest material point [kg] (2D: per metre): the bulk density
+    /// (density × packing) of a continuum material times the volume of a point,
+    /// (h / points_per_axis)^d. `None` without a continuum material.
+    pub fn point_mass(&self) -> Option<f64> {
+        let volume = (self.domain.cell_size / self.mpm.points_per_axis as f64).powi(self.dim() as i32);
+        self.materials
+            .iter()
+            .filter_map(|m| m.mpm.as_ref().map(|c| m.density * c.packing * volume))
+            .reduce(f64::min)
     }
 
     /// Number of components that matter in vectors (2 or 3).
@@ -131,6 +159,14 @@ impl Scene {
             .is_some_and(|o| o.kind.adaptive() && step.is_multiple_of(o.every))
             && self.participants().contains(&Role::Oracle)
     }
+}
+
+/// Jiang 2020 eq. 45: the contact radius of a material point lies between the spacing of the
+/// n points of a cell, h / √n (n = points_per_axis^d, in 2D), and the cell size h.
+fn contact_radius_bounds(scene: &Scene) -> [f64; 2] {
+    let h = scene.domain.cell_size;
+    let n = (scene.mpm.points_per_axis as f64).powi(scene.dim() as i32);
+    [h / n.sqrt(), h]
 }
 
 /// FNV-1a of the file bytes.
@@ -299,12 +335,12 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             "rigid bodies do not cross periodic boundaries yet: a scene with [[rigid]] bodies takes no `domain.periodic` axis".into(),
         ));
     }
-    if !rigids.is_empty() && bodies.iter().any(|b| b.model != Model::Dem) {
+    if !rigids.is_empty() && bodies.iter().any(|b| b.model == Model::Hybrid) {
         return Err(ctx.err(
             None,
             Some("rigid"),
-            "rigid bodies meet grains and walls only: their contact with a continuum (Jiang 2020 §4) is not implemented yet, \
-             so a scene with [[rigid]] bodies takes no \"mpm\" or \"hybrid\" [[body]]"
+            "rigid bodies meet grains, walls and a continuum (Jiang 2020 §4), not a hybrid band yet: a scene with [[rigid]] \
+             bodies takes \"dem\" and \"mpm\" [[body]] tables only"
                 .into(),
         ));
     }
@@ -338,6 +374,25 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         synthetic,
     };
     periodic_fits(ctx, &raw, &scene)?;
+    if let (Some(r), Some(span)) = (
+        scene.coupling.contact_radius,
+        raw.coupling.as_ref().and_then(|c| c.contact_radius.as_ref()).map(|r| r.span()),
+    ) {
+        // Eq. 45's lower end is a guide (the paper's runs sit at it or below); its upper end
+        // keeps a contact within the cell next to the body.
+        let [lo, hi] = contact_radius_bounds(&scene);
+        if r > hi {
+            return Err(ctx.err(
+                Some(span),
+                Some("coupling.contact_radius"),
+                format!(
+                    "must not exceed the cell size h = {hi:.4e} m (Jiang 2020 eq. 45: a contact stays within the cell at the body; \
+                     the point spacing h / √n = {lo:.4e} m is the default), got {}",
+                    crate::number(r)
+                ),
+            ));
+        }
+    }
     if scene.coupling.auto.is_some() && (scene.synthetic.is_some() || !scene.participants().contains(&Role::Coupler)) {
         let span = raw.coupling.as_ref().and_then(|c| c.substeps.as_ref()).map(|s| s.span());
         return Err(ctx.err(

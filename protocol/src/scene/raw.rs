@@ -153,6 +153,7 @@ pub struct RawCoupling {
     pub hybrid_band: Option<Spanned<f64>>,
     pub grain_transfer: Option<Spanned<String>>,
     pub quasi_static: Option<Spanned<f64>>,
+    pub contact_radius: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]

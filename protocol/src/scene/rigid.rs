@@ -233,4 +233,41 @@ mod tests {
         let text = edit(&ok, "cell_size = 0.002", "cell_size = 0.002\nperiodic = [true, false]");
         check_err(&text, None, "rigid", "periodic");
     }
+
+    /// A rigid body and a continuum: DEM and MPM under a coupler, no oracle (no zones to
+    /// publish), with the contact radius of Jiang 2020 eq. 45 (2 × 2 points in a 2-mm cell:
+    /// between 1 and 2 mm, 1 by default); a hybrid body beside a rigid one is refused.
+    #[test]
+    fn a_rigid_body_meets_a_continuum_by_contact() {
+        use crate::Role;
+        let mpm = edit(
+            DEM,
+            "damping = 7.0\nfriction = 0.4\n",
+            "damping = 7.0\nfriction = 0.4\n[material.mpm]\nyoung = 2.5e6\npoisson = 0.3\nfriction_angle = 20.0\npacking = 0.8\n",
+        );
+        let mpm = edit(&mpm, "model = \"dem\"", "model = \"mpm\"");
+        let ok = format!("{mpm}{SQUARE}");
+        let scene = super::super::from_str(&ok, std::path::Path::new("t.toml"), 0).unwrap();
+        assert_eq!(scene.participants(), [Role::Dem, Role::Mpm, Role::Coupler]);
+        assert!(scene.contact_coupling());
+        assert!((scene.contact_radius() - 1e-3).abs() < 1e-15, "{}", scene.contact_radius());
+        let given = super::super::from_str(
+            &format!("{ok}[coupling]\ncontact_radius = 1.2e-3\n"),
+            std::path::Path::new("t.toml"),
+            0,
+        )
+        .unwrap();
+        assert_eq!(given.contact_radius(), 1.2e-3);
+        let text = format!("{ok}[coupling]\ncontact_radius = 3e-3\n");
+        check_err(
+            &text,
+            Some(line_of(&text, "contact_radius")),
+            "coupling.contact_radius",
+            "must not exceed the cell size h = 2.0000e-3 m",
+        );
+        let text = edit(&ok, "model = \"mpm\"", "model = \"hybrid\"");
+        check_err(&text, None, "rigid", "not a hybrid band");
+        let dem_only = super::super::from_str(&format!("{DEM}{SQUARE}"), std::path::Path::new("t.toml"), 0).unwrap();
+        assert!(!dem_only.contact_coupling() && dem_only.participants() == [Role::Dem]);
+    }
 }

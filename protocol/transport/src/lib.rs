@@ -46,6 +46,9 @@ unsafe impl Pod for Summary {}
 unsafe impl Pod for Control {}
 unsafe impl Pod for Ack {}
 unsafe impl Pod for ViewPoint {}
+unsafe impl Pod for BodyReach {}
+unsafe impl Pod for ContactPoint {}
+unsafe impl Pod for PointForce {}
 unsafe impl Pod for u64 {}
 unsafe impl Pod for () {}
 

@@ -7,8 +7,8 @@ use crate::zones::ZoneField;
 use anyhow::bail;
 use grains_protocol::names;
 use grains_protocol::wire::{
-    Ack, AckStatus, Command, Control, EpochItem, NodeStress, NodeVelocity, Param, PointScale, RasterNode, STEP_CHECKPOINT, STEP_STOP,
-    SpawnGrain, SpawnPoint, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
+    Ack, AckStatus, BodyReach, Command, ContactPoint, Control, EpochItem, NodeStress, NodeVelocity, Param, PointForce, PointScale,
+    RasterNode, STEP_CHECKPOINT, STEP_STOP, SpawnGrain, SpawnPoint, StepBegin, StepHeader, Summary, ViewPoint, ZoneCell,
 };
 use grains_protocol::{Role, checksum::checksum_bytes, scene::Scene};
 use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
@@ -102,6 +102,26 @@ pub trait Solver {
     fn restore(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
         let _ = bytes;
         bail!("this solver cannot resume from checkpoints")
+    }
+    /// Contact coupling (DEM, Jiang 2020 §4), at the start of a step: every rigid body's
+    /// reach.
+    fn body_reach(&self, out: &mut Vec<BodyReach>) {
+        let _ = out;
+    }
+    /// Contact coupling (MPM): the points within `reach` of a body plus their contact radius.
+    fn contact_points(&mut self, reach: &[BodyReach], out: &mut Vec<ContactPoint>) {
+        let _ = (reach, out);
+    }
+    /// Contact coupling (DEM): the bodies' force on each of `points` over the step of
+    /// `window` into `out`; their reactions act on the bodies through the step.
+    fn contact_forces(&mut self, window: &StepWindow, points: &[ContactPoint], out: &mut Vec<PointForce>) -> anyhow::Result<()> {
+        let _ = (window, points, out);
+        bail!("this solver has no rigid bodies to meet a continuum")
+    }
+    /// Contact coupling (MPM): the bodies' forces on its points, loads for the coming step.
+    fn take_contact_forces(&mut self, forces: &[PointForce]) -> anyhow::Result<()> {
+        let _ = forces;
+        bail!("this solver has no material points to take contact forces")
     }
     /// A `snapshot` or `set` command, between steps (after step `done`); why not, if it
     /// cannot be carried out.
@@ -247,6 +267,123 @@ impl<T: Transport> EpochPorts<T> {
             },
         )
     }
+}
+
+/// The ports of the contact coupling of rigid bodies and a continuum (Jiang 2020 §4), one
+/// side each: the DEM owns the bodies and their contacts; each step it sends the bodies' reach,
+/// the MPM answers with its points in reach, the DEM with the force on each of them.
+enum ContactPorts<T: Transport> {
+    Dem {
+        reach: T::Publisher<BodyReach, StepHeader>,
+        points: T::Subscriber<ContactPoint, StepHeader>,
+        forces: T::Publisher<PointForce, StepHeader>,
+        reach_buf: Vec<BodyReach>,
+        forces_buf: Vec<PointForce>,
+    },
+    Mpm {
+        reach: T::Subscriber<BodyReach, StepHeader>,
+        points: T::Publisher<ContactPoint, StepHeader>,
+        forces: T::Subscriber<PointForce, StepHeader>,
+        points_buf: Vec<ContactPoint>,
+    },
+}
+
+impl<T: Transport> ContactPorts<T> {
+    fn open(session: &Session<'_, T>) -> anyhow::Result<Self> {
+        Ok(if session.role == Role::Dem {
+            ContactPorts::Dem {
+                reach: session.publisher(&names::BODY_REACH, 16)?,
+                points: session.subscriber(&names::CONTACT_POINTS)?,
+                forces: session.publisher(&names::POINT_FORCES, 1024)?,
+                reach_buf: Vec::new(),
+                forces_buf: Vec::new(),
+            }
+        } else {
+            ContactPorts::Mpm {
+                reach: session.subscriber(&names::BODY_REACH)?,
+                points: session.publisher(&names::CONTACT_POINTS, 1024)?,
+                forces: session.subscriber(&names::POINT_FORCES)?,
+                points_buf: Vec::new(),
+            }
+        })
+    }
+
+    fn connected(&mut self) -> bool {
+        match self {
+            ContactPorts::Dem { reach, points, forces, .. } => {
+                reach.subscriber_count() >= 1 && points.publisher_count() >= 1 && forces.subscriber_count() >= 1
+            }
+            ContactPorts::Mpm { reach, points, forces, .. } => {
+                reach.publisher_count() >= 1 && points.subscriber_count() >= 1 && forces.publisher_count() >= 1
+            }
+        }
+    }
+
+    /// The exchange at the start of `window`'s step, before the solver predicts.
+    fn exchange<S: Solver>(
+        &mut self,
+        session: &Session<'_, T>,
+        window: &StepWindow,
+        solver: &mut S,
+        checksums: bool,
+    ) -> anyhow::Result<()> {
+        let header = session.header(window.step, window.time, window.dt);
+        let step = window.step;
+        match self {
+            ContactPorts::Dem {
+                reach,
+                points,
+                forces,
+                reach_buf,
+                forces_buf,
+            } => {
+                reach_buf.clear();
+                solver.body_reach(reach_buf);
+                send(reach, header, reach_buf, checksums)?;
+                forces_buf.clear();
+                session.recv(points, "the material points near the bodies", |h, p| -> anyhow::Result<()> {
+                    session.check_message(&names::CONTACT_POINTS, h, step, p)?;
+                    solver.contact_forces(window, p, forces_buf)
+                })??;
+                send(forces, header, forces_buf, checksums)
+            }
+            ContactPorts::Mpm {
+                reach,
+                points,
+                forces,
+                points_buf,
+            } => {
+                points_buf.clear();
+                session.recv(reach, "the rigid bodies' reach", |h, r| -> anyhow::Result<()> {
+                    session.check_message(&names::BODY_REACH, h, step, r)?;
+                    solver.contact_points(r, points_buf);
+                    Ok(())
+                })??;
+                send(points, header, points_buf, checksums)?;
+                session.recv(forces, "the contact forces on the points", |h, f| -> anyhow::Result<()> {
+                    session.check_message(&names::POINT_FORCES, h, step, f)?;
+                    solver.take_contact_forces(f)
+                })?
+            }
+        }
+    }
+}
+
+/// Publishes `items` with `header` (and their checksum).
+fn send<E: grains_transport::Pod + grains_transport::ZeroCopy>(
+    publisher: &mut impl Publisher<E, StepHeader>,
+    header: StepHeader,
+    items: &[E],
+    checksums: bool,
+) -> anyhow::Result<()> {
+    publisher.publish(items.len(), |h, out| {
+        out.copy_from_slice(items);
+        *h = header;
+        if checksums {
+            h.checksum = checksum_bytes(as_bytes(out));
+        }
+    })?;
+    Ok(())
 }
 
 /// Views for remote viewers: at most this often, and at most this many items.
@@ -406,6 +543,8 @@ pub fn run<T: Transport, S: Solver>(
 /// The ports of a solver that the coupler drives. (Fields in the reverse of the order they
 /// are opened in: they close in the order they did as the loop's locals, the step begins last.)
 struct CoupledPorts<T: Transport> {
+    /// Rigid bodies against a continuum, when the scene has both.
+    contact: Option<ContactPorts<T>>,
     /// Oracle epochs, when the run's oracle is adaptive.
     epochs: Option<EpochPorts<T>>,
     /// The oracle's zones, when the run has an oracle.
@@ -437,7 +576,13 @@ impl<T: Transport> CoupledPorts<T> {
         };
         let adaptive = scene.oracle.as_ref().is_some_and(|o| o.kind.adaptive()) && zones_sub.is_some();
         let epochs = if adaptive { Some(EpochPorts::<T>::open(session)?) } else { None };
+        let contact = if scene.contact_coupling() {
+            Some(ContactPorts::<T>::open(session)?)
+        } else {
+            None
+        };
         Ok(CoupledPorts {
+            contact,
             epochs,
             zones_sub,
             viewer,
@@ -458,6 +603,7 @@ impl<T: Transport> CoupledPorts<T> {
             && self.summary_pub.subscriber_count() >= 1
             && self.zones_sub.as_ref().is_none_or(|z| z.publisher_count() >= 1)
             && self.epochs.as_mut().is_none_or(EpochPorts::connected)
+            && self.contact.as_mut().is_none_or(ContactPorts::connected)
     }
 
     /// The zone field to build the solver from: the oracle's (step 0) when the run has one,
@@ -486,6 +632,9 @@ impl<T: Transport> CoupledPorts<T> {
     ) -> anyhow::Result<()> {
         let compute_start = Instant::now();
         self.apply_commands(window, solver)?;
+        if let Some(c) = &mut self.contact {
+            c.exchange(session, window, solver, opts.checksums)?;
+        }
         let sent_checksum = self.send_raster(session, window, solver, opts.checksums)?;
         let mut compute = compute_start.elapsed();
 

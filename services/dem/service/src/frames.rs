@@ -24,7 +24,7 @@ impl FrameWriter {
     }
 
     /// The rigid bodies' outlines, with cell data id, velocity, angular_velocity (z), force
-    /// and torque of their contacts.
+    /// and torque of their contacts (material points' included).
     fn write_bodies<S: Space>(&mut self, step: u64, state: &DemState<S>) -> std::io::Result<()> {
         let Some(frames) = &mut self.1 else { return Ok(()) };
         let b = &state.bodies;
@@ -32,8 +32,12 @@ impl FrameWriter {
         let id: Vec<u64> = b.iter().map(|b| b.id).collect();
         let v: Vec<f64> = b.iter().flat_map(|b| [b.v.x, b.v.y, 0.0]).collect();
         let w: Vec<f64> = b.iter().map(|b| b.omega).collect();
-        let f: Vec<f64> = b.iter().flat_map(|b| [b.force.x, b.force.y, 0.0]).collect();
-        let t: Vec<f64> = b.iter().map(|b| b.torque).collect();
+        // Its contacts with bodies, grains and walls, and with material points.
+        let f: Vec<f64> = b
+            .iter()
+            .flat_map(|b| [b.force.x + b.external.x, b.force.y + b.external.y, 0.0])
+            .collect();
+        let t: Vec<f64> = b.iter().map(|b| b.torque + b.external_torque).collect();
         let field = |name, components, values| Field { name, components, values };
         let fields = [
             field("id", 1, Values::U64(&id)),

@@ -114,7 +114,38 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
             SAFE_FRACTION * 100.0,
         ));
     }
+    if let Some((limit, k, m)) = contact_step(scene)
+        && scene.dt > limit
+    {
+        return Err(format!(
+            "the macro-step run.dt = {:.3e} s is above the limit of the rigid bodies' contact with the material points \
+             (Jiang 2020 eq. 51): 2π κ₂ √(m / k_n) = {limit:.3e} s with κ₂ = {CONTACT_KAPPA}, k_n = {k:.4e} N/m of the stiffest rigid \
+             body and the lightest point's mass m = {m:.4e} kg; lower run.dt or soften the body's stiffness_normal (fewer \
+             mpm.points_per_axis also make heavier points)",
+            scene.dt
+        ));
+    }
     Ok(())
+}
+
+/// Jiang 2020 eq. 51's contact term: a material point meets a rigid body once per macro-step,
+/// so the step must resolve the contact's vibration, Δt ≤ 2π κ₂ √(m / k_n) with κ₂ = 0.1 (the
+/// paper's value) and m the lightest material point (the lighter side of the contact).
+pub const CONTACT_KAPPA: f64 = 0.1;
+
+/// The largest macro-step the contacts of material points with the rigid bodies allow (eq. 51),
+/// with the stiffness and the point mass it comes from; `None` without contact coupling.
+pub fn contact_step(scene: &Scene) -> Option<(f64, f64, f64)> {
+    if !scene.contact_coupling() {
+        return None;
+    }
+    let m = scene.point_mass()?;
+    scene
+        .rigids
+        .iter()
+        .filter_map(|r| scene.materials[r.material].dem.as_ref().map(|d| d.stiffness_normal))
+        .map(|k| (2.0 * std::f64::consts::PI * CONTACT_KAPPA * (m / k).sqrt(), k, m))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
 }
 
 /// Builds the DEM state of a scene: grains of every `dem` body on a jittered lattice (a

@@ -8,7 +8,9 @@ use grains_dem::space::{Space, Vector};
 use grains_dem::state::{DemState, WallShape};
 use grains_protocol::scene::Model;
 use grains_protocol::scene::{GrainTransfer, Scene};
-use grains_protocol::wire::{Command, Control, EpochItem, NodeStress, NodeVelocity, Param, RasterNode, ViewPoint, Zone};
+use grains_protocol::wire::{
+    BodyReach, Command, ContactPoint, Control, EpochItem, NodeStress, NodeVelocity, Param, PointForce, RasterNode, ViewPoint, Zone,
+};
 use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
 
 pub struct DemSolver<S: Space> {
@@ -21,7 +23,7 @@ pub struct DemSolver<S: Space> {
     out_dir: Option<std::path::PathBuf>,
     /// `walls.csv`: per macro-step, the force of the grains on every wall and where the wall
     /// is (force–displacement curves of plates, penetrometers, drums).
-    walls_log: Option<std::io::BufWriter<std::fs::File>>,
+    walls_log: Option<StepLog>,
     /// Kinetic energy above which the run is declared runaway [J], and the domain's largest
     /// extent it is computed with [m].
     energy_bound: f64,
@@ -34,6 +36,10 @@ pub struct DemSolver<S: Space> {
     weight: f64,
     /// The step a resumed run started after (its outputs continue from there).
     resumed: Option<u64>,
+    /// The rigid bodies' contacts with material points (Jiang 2020 §4) and their histories.
+    point_contacts: grains_dem::bodies::BodyContacts,
+    /// `bodies.csv`: per macro-step, each rigid body's pose and the force and torque on it.
+    bodies_log: Option<StepLog>,
 }
 
 /// What a checkpoint holds of the DEM (see [`Solver::save`]).
@@ -44,6 +50,7 @@ struct Saved<S: Space> {
     pipeline: grains_dem::pipeline::Carry<S>,
     accel: Vec<(u64, S::V)>,
     energy_bound: f64,
+    point_contacts: grains_dem::bodies::BodyContacts,
 }
 
 impl<S: Space> DemSolver<S> {
@@ -58,19 +65,33 @@ impl<S: Space> DemSolver<S> {
             Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir, resume, &state)?),
             _ => None,
         };
-        let walls_log = match out_dir {
-            Some(dir) if !state.walls.is_empty() && resume.is_some() => Some(walls_log_after(&dir.join("walls.csv"), resume.unwrap_or(0))?),
-            Some(dir) if !state.walls.is_empty() => {
-                use std::io::Write as _;
-                let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("walls.csv"))?);
-                let mut header = String::from("step,time");
-                for k in 0..state.walls.len() {
-                    header.push_str(&format!(",wall{k}_fx,wall{k}_fy,wall{k}_fz,wall{k}_x,wall{k}_y,wall{k}_z"));
-                }
-                writeln!(f, "{header}")?;
-                Some(f)
-            }
-            _ => None,
+        let log = |name: &str, header: String| -> std::io::Result<Option<StepLog>> {
+            out_dir.map(|dir| StepLog::open(&dir.join(name), &header, resume)).transpose()
+        };
+        let walls_log = match state.walls.is_empty() {
+            true => None,
+            false => log(
+                "walls.csv",
+                (0..state.walls.len())
+                    .map(|k| format!(",wall{k}_fx,wall{k}_fy,wall{k}_fz,wall{k}_x,wall{k}_y,wall{k}_z"))
+                    .collect(),
+            )?,
+        };
+        let bodies_log = match state.bodies.is_empty() {
+            true => None,
+            false => log(
+                "bodies.csv",
+                state
+                    .bodies
+                    .iter()
+                    .map(|b| {
+                        let k = b.id;
+                        format!(
+                            ",body{k}_x,body{k}_y,body{k}_angle,body{k}_vx,body{k}_vy,body{k}_omega,body{k}_fx,body{k}_fy,body{k}_torque"
+                        )
+                    })
+                    .collect(),
+            )?,
         };
         let mut solver = DemSolver {
             state,
@@ -99,6 +120,8 @@ impl<S: Space> DemSolver<S> {
             }),
             weight: scene.coupling.weight,
             resumed: resume,
+            point_contacts: Default::default(),
+            bodies_log,
         };
         if let Some((f, _)) = &mut solver.frames
             && resume.is_none()
@@ -143,19 +166,40 @@ impl<S: Space> DemSolver<S> {
     }
 }
 
-/// `walls.csv` of a run resumed after `step`: its rows up to that step kept, open to append.
-fn walls_log_after(path: &std::path::Path, step: u64) -> std::io::Result<std::io::BufWriter<std::fs::File>> {
-    let text = std::fs::read_to_string(path)?;
-    let mut kept = String::new();
-    for (k, line) in text.lines().enumerate() {
-        let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
-        if k == 0 || row_step.is_some_and(|s| s <= step) {
-            kept.push_str(line);
-            kept.push('\n');
+/// A CSV of one row per macro-step (`walls.csv`, `bodies.csv`), flushed every row: a run
+/// resumed from a checkpoint finds every row up to it.
+struct StepLog(std::io::BufWriter<std::fs::File>);
+
+impl StepLog {
+    /// A new log with the columns `step,time` + `columns`; or, resuming after a step, the
+    /// existing one with its rows up to that step kept, open to append.
+    fn open(path: &std::path::Path, columns: &str, resume: Option<u64>) -> std::io::Result<StepLog> {
+        use std::io::Write as _;
+        let Some(step) = resume else {
+            let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
+            writeln!(f, "step,time{columns}")?;
+            return Ok(StepLog(f));
+        };
+        let text = std::fs::read_to_string(path)?;
+        let mut kept = String::new();
+        for (k, line) in text.lines().enumerate() {
+            let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
+            if k == 0 || row_step.is_some_and(|s| s <= step) {
+                kept.push_str(line);
+                kept.push('\n');
+            }
         }
+        std::fs::write(path, kept)?;
+        Ok(StepLog(std::io::BufWriter::new(
+            std::fs::OpenOptions::new().append(true).open(path)?,
+        )))
     }
-    std::fs::write(path, kept)?;
-    Ok(std::io::BufWriter::new(std::fs::OpenOptions::new().append(true).open(path)?))
+
+    fn row(&mut self, row: &str) -> std::io::Result<()> {
+        use std::io::Write as _;
+        writeln!(self.0, "{row}")?;
+        self.0.flush()
+    }
 }
 
 /// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
@@ -409,6 +453,7 @@ impl<S: Space> Solver for DemSolver<S> {
             pipeline: self.pipeline.carry(),
             accel: self.coupled.carry().to_vec(),
             energy_bound: self.energy_bound,
+            point_contacts: self.point_contacts.clone(),
         })
     }
 
@@ -418,6 +463,68 @@ impl<S: Space> Solver for DemSolver<S> {
         self.pipeline.restore(saved.pipeline);
         self.coupled.restore(saved.accel);
         self.energy_bound = saved.energy_bound;
+        self.point_contacts = saved.point_contacts;
+        Ok(())
+    }
+
+    fn body_reach(&self, out: &mut Vec<BodyReach>) {
+        out.extend(self.state.bodies.iter().map(|b| BodyReach {
+            id: b.id,
+            center: [b.x.x, b.x.y, 0.0],
+            reach: b.reach(),
+        }));
+    }
+
+    /// Jiang 2020 eq. 44–50 ([`grains_dem::bodies::point_forces`]): the points meet the
+    /// bodies as disks of their contact radius; the reactions stay on the bodies as their
+    /// external load through the step's substeps.
+    fn contact_forces(&mut self, window: &StepWindow, points: &[ContactPoint], out: &mut Vec<PointForce>) -> anyhow::Result<()> {
+        use glam::DVec2;
+        let disks: Vec<grains_dem::bodies::GrainView> = points
+            .iter()
+            .enumerate()
+            .map(|(k, p)| grains_dem::bodies::GrainView {
+                index: k,
+                x: DVec2::new(p.position[0], p.position[1]),
+                v: DVec2::new(p.velocity[0], p.velocity[1]),
+                omega: 0.0,
+                radius: p.radius,
+                inv_mass: 1.0 / p.mass,
+                scale: 1.0,
+                id: p.id,
+            })
+            .collect();
+        if let Some(p) = points.iter().find(|p| !(p.mass > 0.0 && p.radius > 0.0)) {
+            bail!(
+                "{}: step {}: point {} has mass {} and contact radius {} (both must be > 0)",
+                grains_protocol::names::CONTACT_POINTS.name,
+                window.step,
+                p.id,
+                p.mass,
+                p.radius
+            );
+        }
+        let mut forces = grains_dem::bodies::point_forces(
+            &mut self.state.bodies,
+            &disks,
+            &self.state.params.materials,
+            window.dt,
+            &mut self.point_contacts,
+        );
+        // A point may touch two bodies: one force each, in index order.
+        forces.sort_by_key(|f| f.0);
+        for (k, f) in forces {
+            match out.last_mut() {
+                Some(last) if last.index == points[k].index => {
+                    last.force[0] += f.x;
+                    last.force[1] += f.y;
+                }
+                _ => out.push(PointForce {
+                    index: points[k].index,
+                    force: [f.x, f.y, 0.0],
+                }),
+            }
+        }
         Ok(())
     }
 
@@ -439,7 +546,6 @@ impl<S: Space> DemSolver<S> {
     /// After a step: the walls' loads and the frames.
     fn after_step(&mut self, window: &StepWindow) -> anyhow::Result<()> {
         if let Some(log) = &mut self.walls_log {
-            use std::io::Write as _;
             let mut row = format!("{},{}", window.step, self.state.time);
             for w in &self.state.walls {
                 let f = S::to_array(w.load);
@@ -450,10 +556,18 @@ impl<S: Space> DemSolver<S> {
                 });
                 row.push_str(&format!(",{},{},{},{},{},{}", f[0], f[1], f[2], at[0], at[1], at[2]));
             }
-            writeln!(log, "{row}")?;
-            if window.step.is_multiple_of(100) {
-                log.flush()?;
+            log.row(&row)?;
+        }
+        if let Some(log) = &mut self.bodies_log {
+            let mut row = format!("{},{}", window.step, self.state.time);
+            for b in &self.state.bodies {
+                let (f, t) = (b.force + b.external, b.torque + b.external_torque);
+                row.push_str(&format!(
+                    ",{},{},{},{},{},{},{},{},{}",
+                    b.x.x, b.x.y, b.angle, b.v.x, b.v.y, b.omega, f.x, f.y, t
+                ));
             }
+            log.row(&row)?;
         }
         if let Some((f, every)) = &mut self.frames
             && window.step.is_multiple_of(*every)

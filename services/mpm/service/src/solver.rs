@@ -8,7 +8,9 @@ use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline};
 use grains_mpm::points::{Points, totals};
 use grains_protocol::scene::Scene;
-use grains_protocol::wire::{Command, Control, EpochItem, NodeVelocity, Param, RasterNode, ViewPoint, Zone};
+use grains_protocol::wire::{
+    BodyReach, Command, ContactPoint, Control, EpochItem, NodeVelocity, Param, PointForce, RasterNode, ViewPoint, Zone,
+};
 use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
 use grains_service::vtu::{Field, PointFrames, Values};
 
@@ -30,6 +32,16 @@ pub struct MpmSolver<S: MpmSpace> {
     weight: f64,
     /// The step a resumed run started after (its outputs continue from there).
     resumed: Option<u64>,
+    /// Whether the run has grains, which the coupler meets on the grid (else the raster goes
+    /// out empty: rigid bodies meet the points by contact).
+    grains: bool,
+    /// Contact radius r_p of a point against a rigid body [m].
+    contact_radius: f64,
+    /// The rigid bodies' forces on the points appended to `points.loads` for the current
+    /// step (taken off after it).
+    contact_loads: usize,
+    /// Energy the rigid bodies can bring [J] (for the runaway bound).
+    rigid_energy: f64,
 }
 
 /// What a checkpoint holds of the MPM (see [`Solver::save`]): the points, what commands may
@@ -56,7 +68,8 @@ impl<S: MpmSpace> MpmSolver<S> {
     ) -> anyhow::Result<Self> {
         let pipeline = MpmPipeline::new(scene.threads as usize).map_err(anyhow::Error::msg)?;
         let extent = grains_service::grid::scene_extent(scene);
-        let energy_bound = runaway_bound(extent, &points, &params);
+        let rigid_energy = rigid_energy(scene, points.mass.iter().sum(), extent);
+        let energy_bound = runaway_bound(extent, &points, &params) + 100.0 * rigid_energy;
         let frames = match out_dir {
             Some(dir) if scene.output.frames_every > 0 => Some((PointFrames::open(dir, "points", resume)?, scene.output.frames_every)),
             _ => None,
@@ -77,6 +90,10 @@ impl<S: MpmSpace> MpmSolver<S> {
                 .unwrap_or(1.0),
             weight: scene.coupling.weight,
             resumed: resume,
+            grains: scene.bodies.iter().any(|b| b.model != grains_protocol::scene::Model::Mpm),
+            contact_radius: scene.contact_radius(),
+            contact_loads: 0,
+            rigid_energy,
         };
         if resume.is_none() {
             solver.write_frame(0)?;
@@ -148,6 +165,30 @@ fn runaway_bound<S: MpmSpace>(extent: f64, pts: &Points<S>, params: &MpmParams<S
     100.0 * (ke + mass * g * extent + 0.5 * mass * wall_speed * wall_speed + loads).max(f64::MIN_POSITIVE)
 }
 
+/// An upper bound of the energy the scene's rigid bodies can give the points [J]: a moving
+/// body's kinetic energy (its mass at most ρ π R², R its reach from its first vertex) and
+/// the work of gravity on it across the domain; a scripted body drives like a wall, the
+/// points' whole `mass` at its fastest speed.
+fn rigid_energy(scene: &Scene, mass: f64, extent: f64) -> f64 {
+    use grains_protocol::scene::RigidMotion;
+    let g = scene.gravity.iter().map(|g| g * g).sum::<f64>().sqrt();
+    scene
+        .rigids
+        .iter()
+        .map(|r| {
+            let [x0, y0] = r.vertices[0];
+            let reach = r.vertices.iter().map(|&[x, y]| (x - x0).hypot(y - y0)).fold(0.0, f64::max) + 2.0 * r.radius;
+            let speed = r.velocity[0].hypot(r.velocity[1]) + r.spin.abs() * reach;
+            let m = scene.materials[r.material].density * std::f64::consts::PI * reach * reach;
+            match r.motion {
+                RigidMotion::Fixed => 0.0,
+                RigidMotion::Free => 0.5 * m * speed * speed + m * g * extent,
+                RigidMotion::Scripted => 0.5 * mass * speed * speed,
+            }
+        })
+        .sum()
+}
+
 fn step_failed(step: u64, time: f64, e: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!(
         "MPM step {step} (t = {time:.6e} s): {e}; likely cause: a time step too large for the stiffness (CFL) or the flow speed, \
@@ -158,6 +199,10 @@ fn step_failed(step: u64, time: f64, e: impl std::fmt::Display) -> anyhow::Error
 impl<S: MpmSpace> MpmSolver<S> {
     /// After a step: runaway energy and frames.
     fn after_step(&mut self, window: &StepWindow) -> anyhow::Result<()> {
+        // The contact forces acted for this step only (the loads kept their order).
+        let dead = self.points.loads.len() - self.contact_loads;
+        self.points.loads.truncate(dead);
+        self.contact_loads = 0;
         let (ke, _) = totals(&self.points);
         if ke > self.energy_bound {
             bail!(
@@ -187,6 +232,9 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             .map_err(|e| step_failed(window.step, time, e))?;
         let grid = self.params.grid;
         self.raster.clear();
+        if !self.grains {
+            return Ok(0);
+        }
         self.pipeline.for_each_node_mut(|ijk, mass, v| {
             let node = grid.index(ijk).expect("stored nodes with mass lie inside the grid");
             self.raster.push(RasterNode {
@@ -230,6 +278,49 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             .step(&mut self.points, &self.params, window.dt)
             .map_err(|e| step_failed(window.step, time, e))?;
         self.after_step(window)
+    }
+
+    fn contact_points(&mut self, reach: &[BodyReach], out: &mut Vec<ContactPoint>) {
+        let p = &self.points;
+        let r_p = self.contact_radius;
+        let near = |x: [f64; 3]| {
+            reach.iter().any(|b| {
+                let d2: f64 = (0..3).map(|k| (x[k] - b.center[k]).powi(2)).sum();
+                d2 <= (b.reach + r_p).powi(2)
+            })
+        };
+        for k in 0..p.len() {
+            let x = S::to_array(p.x[k]);
+            if near(x) {
+                out.push(ContactPoint {
+                    index: k as u64,
+                    id: p.id[k],
+                    position: x,
+                    velocity: S::to_array(p.v[k]),
+                    mass: p.mass[k],
+                    radius: r_p,
+                });
+            }
+        }
+    }
+
+    /// Jiang 2020 eq. 46–48: a body's contact force on a point is a load on it for the step,
+    /// spread to its nodes with its weights.
+    fn take_contact_forces(&mut self, forces: &[PointForce]) -> anyhow::Result<()> {
+        let n = self.points.len() as u64;
+        if let Some(f) = forces.iter().find(|f| f.index >= n || !f.force.iter().all(|c| c.is_finite())) {
+            bail!(
+                "{}: a force {:?} on point index {} (the MPM has {n} points): not a point it sent, or not finite",
+                grains_protocol::names::POINT_FORCES.name,
+                f.force,
+                f.index
+            );
+        }
+        self.points
+            .loads
+            .extend(forces.iter().map(|f| (f.index as usize, S::from_array(f.force))));
+        self.contact_loads = forces.len();
+        Ok(())
     }
 
     fn view(&self, max: usize, out: &mut Vec<ViewPoint>) -> u64 {
@@ -338,7 +429,9 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             };
         }
         if !changes.spawn_points.is_empty() || !changes.scale_points.is_empty() {
-            self.energy_bound = self.energy_bound.max(runaway_bound(self.extent, &self.points, &self.params));
+            self.energy_bound = self
+                .energy_bound
+                .max(runaway_bound(self.extent, &self.points, &self.params) + 100.0 * self.rigid_energy);
         }
         Ok(())
     }
