@@ -7,7 +7,8 @@
 //! - [`column`]: the hybrid and MPM column collapse against the pure DEM one (Yue 2018 §5,
 //!   Fig. 5), runouts against Lube et al. 2005 and Yue 2018's laws;
 //! - [`silo`], [`drum`]: discharge, Beverloo, clogging, bouncing; the angle of a turning drum;
-//! - [`cost`]: error against wall time, with the Pareto front.
+//! - [`cost`]: error against wall time, with the Pareto front;
+//! - [`sdem`]: rigid bodies in contact with a continuum (Jiang 2020 §5).
 //!
 //! Below the parts: [`runs`] (running scenes, reading what a run did), [`packings`] (every
 //! packing poured, in one place), [`deposit`] (frames and deposits read back), [`pictures`]
@@ -28,6 +29,7 @@ pub mod packings;
 pub mod pictures;
 pub mod runs;
 pub mod scenes;
+pub mod sdem;
 pub mod silo;
 pub mod stability;
 pub mod stats;
@@ -108,6 +110,7 @@ fn run_part(p: PartName, args: &ValidateArgs) -> anyhow::Result<Part> {
         PartName::Silo => silo::validate(args),
         PartName::Drum => drum::validate(args),
         PartName::Cost => cost::validate(args),
+        PartName::Sdem => sdem::validate(args),
     }
 }
 

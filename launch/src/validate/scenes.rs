@@ -34,3 +34,14 @@ pub mod drum {
     pub const CENTRE: [f64; 2] = [0.05, 0.05];
     pub const RADIUS: f64 = 0.045;
 }
+
+/// Rigid bodies in contact with a continuum (Jiang 2020 §5).
+pub mod sdem {
+    /// §5.1.1: an MPM disk hits a rigid disk (the MPM body first, the rigid disk `rigid.0`).
+    pub const DISK: &str = "sdem_disk_impact_2d.toml";
+    /// The soft disk's moduli are the hard one's over this.
+    pub const SOFTER: f64 = 10.0;
+    /// §5.2.1: an MPM block at rest on a fixed slab (`rigid.0`), and its grids [m].
+    pub const BLOCK: &str = "sdem_block_rest_2d.toml";
+    pub const GRIDS: [f64; 4] = [0.002, 0.0025, 0.003, 0.004];
+}

@@ -59,7 +59,8 @@ impl<S: Space> DemSolver<S> {
     pub fn new(scene: &Scene, state: DemState<S>, out_dir: Option<&std::path::Path>, resume: Option<u64>) -> anyhow::Result<Self> {
         let pipeline = DemPipeline::new(scene.threads as usize)?;
         let extent = grains_service::grid::scene_extent(scene);
-        let energy_bound = runaway_bound(extent, S::from_array(scene.gravity).length(), &state);
+        let continuum = if scene.contact_coupling() { continuum(scene) } else { (0.0, 0.0) };
+        let energy_bound = runaway_bound(extent, S::from_array(scene.gravity).length(), &state, continuum);
         let (grid, kernel) = grains_service::grid::scene_grid(scene);
         let frames = match out_dir {
             Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir, resume, &state)?),
@@ -202,14 +203,36 @@ impl StepLog {
     }
 }
 
+/// The mass and kinetic energy of the scene's `mpm` bodies at the start (bulk density × the
+/// shape's volume).
+fn continuum(scene: &Scene) -> (f64, f64) {
+    let dim = scene.dim();
+    scene
+        .bodies
+        .iter()
+        .filter(|b| b.model == Model::Mpm)
+        .map(|b| {
+            let volume = match b.shape {
+                grains_protocol::scene::Shape::Box { min, max } => (0..dim).map(|k| max[k] - min[k]).product::<f64>(),
+                grains_protocol::scene::Shape::Ball { radius, .. } if dim == 2 => std::f64::consts::PI * radius * radius,
+                grains_protocol::scene::Shape::Ball { radius, .. } => 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3),
+            };
+            let mat = &scene.materials[b.material];
+            let m = mat.density * mat.mpm.as_ref().map_or(1.0, |c| c.packing) * volume;
+            (m, 0.5 * m * b.velocity.iter().map(|v| v * v).sum::<f64>())
+        })
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
 /// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
 /// energy every grain would have at the fastest wall's speed): a run that exceeds it is
-/// blowing up, not flowing.
-fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64 {
+/// blowing up, not flowing. `continuum`: the mass and kinetic energy of a continuum the
+/// rigid bodies meet by contact (it can give them all of it).
+fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>, continuum: (f64, f64)) -> f64 {
     use grains_dem::bodies::Motion;
     let g = &state.grains;
     let free = state.bodies.iter().filter(|b| b.motion == Motion::Free);
-    let mass: f64 = g.mass.iter().sum::<f64>() + free.map(|b| b.mass).sum::<f64>();
+    let mass: f64 = g.mass.iter().sum::<f64>() + free.map(|b| b.mass).sum::<f64>() + continuum.0;
     // Scripted bodies drive like walls.
     let scripted = state.bodies.iter().filter_map(|b| match b.motion {
         Motion::Scripted { velocity, spin } => Some(velocity.length() + spin.abs() * b.reach()),
@@ -227,7 +250,7 @@ fn runaway_bound<S: Space>(extent: f64, g_norm: f64, state: &DemState<S>) -> f64
         })
         .chain(scripted)
         .fold(0.0, f64::max);
-    let bound = DemPipeline::kinetic_energy(state) + mass * g_norm * extent + 0.5 * mass * wall_speed * wall_speed;
+    let bound = DemPipeline::kinetic_energy(state) + continuum.1 + mass * g_norm * extent + 0.5 * mass * wall_speed * wall_speed;
     100.0 * bound.max(f64::MIN_POSITIVE)
 }
 
@@ -440,7 +463,9 @@ impl<S: Space> Solver for DemSolver<S> {
             self.pipeline.invalidate();
         }
         if !changes.spawn_grains.is_empty() {
-            self.energy_bound = self.energy_bound.max(runaway_bound(self.extent, self.gravity, &self.state));
+            self.energy_bound = self
+                .energy_bound
+                .max(runaway_bound(self.extent, self.gravity, &self.state, (0.0, 0.0)));
         }
         Ok(())
     }
