@@ -784,15 +784,24 @@ fn rigid_bodies_carry_a_continuum_by_contact_and_threads_give_the_same_bytes() {
     let threads = run_dir(&err);
     let same = |name: &str| std::fs::read(dir.join(name)).unwrap() == std::fs::read(threads.join(name)).unwrap();
     assert!(same("bodies.csv"), "bodies.csv differs between processes and threads");
-    for f in std::fs::read_dir(dir.join("frames")).unwrap().flatten() {
-        let name = format!("frames/{}", f.file_name().to_string_lossy());
+    let frames = |d: &std::path::Path| -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(d.join("frames"))
+            .unwrap()
+            .flatten()
+            .map(|f| format!("frames/{}", f.file_name().to_string_lossy()))
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(frames(&dir), frames(&threads), "the same frames");
+    for name in frames(&dir) {
         assert!(same(&name), "{name} differs between processes and threads");
     }
     let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
     assert_eq!(read(&dir), read(&threads));
 
     // A macro-step the points' contacts cannot resolve is refused before anything starts
-    // (eq. 51: 2π 0.1 √(1.5e-3 kg / 1e6 N/m) = 2.433e-5 s).
+    // (eq. 51: 2π 0.1 √(1.5e-3 kg / 1e6 N/m) = 2.433e-5 s, the point lighter than the square).
     let (status, err) = run_to_end(&["run", scene_path, "--out", out.to_str().unwrap(), "--set", "run.dt=3e-5"]);
     assert_eq!(status.code(), Some(2), "{err}");
     for needle in ["run.dt", "eq. 51", "2.433e-5 s"] {

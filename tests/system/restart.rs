@@ -8,11 +8,12 @@ use std::path::Path;
 use std::time::Duration;
 
 /// The physics of a finished run: `metrics.csv` without its timings, every frame's bytes
-/// (by file name), and `walls.csv` and `bodies.csv` if there are.
+/// (by file name), and `walls.csv`, `walls_mpm.csv` and `bodies.csv` if there are.
 pub(crate) struct Outputs {
     metrics: String,
     frames: Vec<(String, Vec<u8>)>,
     walls: Option<String>,
+    walls_mpm: Option<String>,
     bodies: Option<String>,
 }
 
@@ -28,6 +29,7 @@ pub(crate) fn outputs(dir: &Path) -> Outputs {
         metrics,
         frames,
         walls: std::fs::read_to_string(dir.join("walls.csv")).ok(),
+        walls_mpm: std::fs::read_to_string(dir.join("walls_mpm.csv")).ok(),
         bodies: std::fs::read_to_string(dir.join("bodies.csv")).ok(),
     }
 }
@@ -41,6 +43,7 @@ pub(crate) fn assert_same(resumed: &Outputs, whole: &Outputs, what: &str) {
         assert!(a == b, "{what}: frame {name} differs after the resume");
     }
     assert_eq!(resumed.walls, whole.walls, "{what}: walls.csv differs after the resume");
+    assert_eq!(resumed.walls_mpm, whole.walls_mpm, "{what}: walls_mpm.csv differs after the resume");
     assert_eq!(resumed.bodies, whole.bodies, "{what}: bodies.csv differs after the resume");
 }
 

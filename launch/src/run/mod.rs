@@ -196,7 +196,7 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
     if let Some((limit, k, m)) = grains_dem_service::setup::contact_step(&s) {
         println!(
             "{}: rigid bodies meet the material points by contact (r_p = {:.4e} m): macro-step {} s of at most {limit:.3e} s \
-             (Jiang 2020 eq. 51, k_n = {k:.4e} N/m, lightest point {m:.4e} kg)",
+             (Jiang 2020 eq. 51, k_n = {k:.4e} N/m, the lighter side of a contact {m:.4e} kg)",
             path.display(),
             s.contact_radius(),
             s.dt

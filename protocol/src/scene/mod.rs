@@ -136,13 +136,17 @@ impl Scene {
     }
 
     /// The mass of the lightest material point [kg] (2D: per metre): the bulk density
-    /// (density × packing) of a continuum material times the volume of a point,
-    /// (h / points_per_axis)^d. `None` without a continuum material.
+    /// (density × packing) of the continuum bodies' material times the volume of a point,
+    /// (h / points_per_axis)^d. `None` without a continuum.
     pub fn point_mass(&self) -> Option<f64> {
         let volume = (self.domain.cell_size / self.mpm.points_per_axis as f64).powi(self.dim() as i32);
-        self.materials
+        self.bodies
             .iter()
-            .filter_map(|m| m.mpm.as_ref().map(|c| m.density * c.packing * volume))
+            .filter(|b| b.model != Model::Dem)
+            .filter_map(|b| {
+                let m = &self.materials[b.material];
+                m.mpm.as_ref().map(|c| m.density * c.packing * volume)
+            })
             .reduce(f64::min)
     }
 
@@ -335,6 +339,15 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             "rigid bodies do not cross periodic boundaries yet: a scene with [[rigid]] bodies takes no `domain.periodic` axis".into(),
         ));
     }
+    if !rigids.is_empty() && bodies.iter().any(|b| b.model == Model::Mpm) && bodies.iter().any(|b| b.model == Model::Dem) {
+        return Err(ctx.err(
+            None,
+            Some("rigid"),
+            "rigid bodies meet either grains or a continuum for now: with [[rigid]] bodies, \"dem\" and \"mpm\" [[body]] \
+             tables do not mix (grains and points meet only in a hybrid band)"
+                .into(),
+        ));
+    }
     if !rigids.is_empty() && bodies.iter().any(|b| b.model == Model::Hybrid) {
         return Err(ctx.err(
             None,
@@ -381,19 +394,19 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
         // Eq. 45's lower end is a guide (the paper's runs sit at it or below); its upper end
         // keeps a contact within the cell next to the body.
         let [lo, hi] = contact_radius_bounds(&scene);
-        if r > hi {
+        if r >= hi {
             return Err(ctx.err(
                 Some(span),
                 Some("coupling.contact_radius"),
                 format!(
-                    "must not exceed the cell size h = {hi:.4e} m (Jiang 2020 eq. 45: a contact stays within the cell at the body; \
+                    "must be below the cell size h = {hi:.4e} m (Jiang 2020 eq. 45: a contact stays within the cell at the body; \
                      the point spacing h / √n = {lo:.4e} m is the default), got {}",
                     crate::number(r)
                 ),
             ));
         }
     }
-    if scene.coupling.auto.is_some() && (scene.synthetic.is_some() || !scene.participants().contains(&Role::Coupler)) {
+    if scene.coupling.auto.is_some() && (scene.synthetic.is_some() || !scene.bodies.iter().any(|b| b.model == Model::Hybrid)) {
         let span = raw.coupling.as_ref().and_then(|c| c.substeps.as_ref()).map(|s| s.span());
         return Err(ctx.err(
             span,

@@ -263,10 +263,22 @@ mod tests {
             &text,
             Some(line_of(&text, "contact_radius")),
             "coupling.contact_radius",
-            "must not exceed the cell size h = 2.0000e-3 m",
+            "must be below the cell size h = 2.0000e-3 m",
         );
         let text = edit(&ok, "model = \"mpm\"", "model = \"hybrid\"");
         check_err(&text, None, "rigid", "not a hybrid band");
+        let text =
+            format!("{ok}\n[[body]]\nmaterial = \"glass\"\nmodel = \"dem\"\nshape = \"box\"\nmin = [0.06, 0.0]\nmax = [0.08, 0.02]\n");
+        check_err(&text, None, "rigid", "do not mix");
+        let text = format!("{ok}[coupling]\ncontact_radius = 2e-3\n");
+        check_err(
+            &text,
+            Some(line_of(&text, "contact_radius")),
+            "coupling.contact_radius",
+            "below the cell size",
+        );
+        let text = format!("{ok}[coupling]\nsubsteps = \"auto\"\n");
+        check_err(&text, Some(line_of(&text, "substeps")), "coupling.substeps", "no hybrid body");
         let dem_only = super::super::from_str(&format!("{DEM}{SQUARE}"), std::path::Path::new("t.toml"), 0).unwrap();
         assert!(!dem_only.contact_coupling() && dem_only.participants() == [Role::Dem]);
     }

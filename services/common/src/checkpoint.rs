@@ -26,8 +26,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Version of the layout (header, manifest, and the built-in payloads).
-/// 2: the DEM's state and pipeline carry rigid bodies and their contacts.
-pub const FORMAT: u32 = 2;
+/// 2: the DEM's state and pipeline carry rigid bodies and their contacts; 3: the DEM carries
+/// its bodies' contacts with material points.
+pub const FORMAT: u32 = 3;
 const MAGIC: [u8; 8] = *b"GRAINSCP";
 /// magic, format, role code, scene hash, step, payload length, payload checksum.
 const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 8 + 8;

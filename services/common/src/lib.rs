@@ -9,6 +9,7 @@
 //! - [`zones`]: the layered zones of hybrid bodies (which grains and points exist, their weights);
 //! - [`checkpoint`]: a participant's state written after a step, and read back to resume;
 //! - [`vtu`]: VTU frames of point clouds (grains, material points) for ParaView;
+//! - [`step_log`]: per-step CSV logs (walls' and bodies' loads) that a resumed run continues;
 //! - [`signals`], [`cli`]: SIGINT/SIGTERM handling and the flags every binary shares;
 //! - [`fault`]: fault injection from the environment (`GRAINS_FAULT`), read once, for the
 //!   libraries to take as parameters.
@@ -20,6 +21,7 @@ pub mod grid;
 pub mod session;
 pub mod signals;
 pub mod solver;
+pub mod step_log;
 pub mod synthetic;
 pub mod telemetry;
 pub mod vtu;

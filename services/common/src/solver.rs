@@ -319,16 +319,25 @@ impl<T: Transport> ContactPorts<T> {
         }
     }
 
-    /// The exchange at the start of `window`'s step, before the solver predicts.
+    /// The exchange at the start of `window`'s step, before the solver predicts; returns the
+    /// time spent waiting for the other solver.
     fn exchange<S: Solver>(
         &mut self,
         session: &Session<'_, T>,
         window: &StepWindow,
         solver: &mut S,
         checksums: bool,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<Duration> {
         let header = session.header(window.step, window.time, window.dt);
         let step = window.step;
+        // Time in `recv` minus the time the solver took inside it.
+        let mut waited = Duration::ZERO;
+        let mut timed_recv = |recv: &mut dyn FnMut(&mut Duration) -> anyhow::Result<()>| -> anyhow::Result<()> {
+            let (t, mut inside) = (Instant::now(), Duration::ZERO);
+            recv(&mut inside)?;
+            waited += t.elapsed().saturating_sub(inside);
+            Ok(())
+        };
         match self {
             ContactPorts::Dem {
                 reach,
@@ -341,11 +350,16 @@ impl<T: Transport> ContactPorts<T> {
                 solver.body_reach(reach_buf);
                 send(reach, header, reach_buf, checksums)?;
                 forces_buf.clear();
-                session.recv(points, "the material points near the bodies", |h, p| -> anyhow::Result<()> {
-                    session.check_message(&names::CONTACT_POINTS, h, step, p)?;
-                    solver.contact_forces(window, p, forces_buf)
-                })??;
-                send(forces, header, forces_buf, checksums)
+                timed_recv(&mut |inside| {
+                    session.recv(points, "the material points near the bodies", |h, p| -> anyhow::Result<()> {
+                        let t = Instant::now();
+                        session.check_message(&names::CONTACT_POINTS, h, step, p)?;
+                        solver.contact_forces(window, p, forces_buf)?;
+                        *inside = t.elapsed();
+                        Ok(())
+                    })?
+                })?;
+                send(forces, header, forces_buf, checksums)?;
             }
             ContactPorts::Mpm {
                 reach,
@@ -354,18 +368,28 @@ impl<T: Transport> ContactPorts<T> {
                 points_buf,
             } => {
                 points_buf.clear();
-                session.recv(reach, "the rigid bodies' reach", |h, r| -> anyhow::Result<()> {
-                    session.check_message(&names::BODY_REACH, h, step, r)?;
-                    solver.contact_points(r, points_buf);
-                    Ok(())
-                })??;
+                timed_recv(&mut |inside| {
+                    session.recv(reach, "the rigid bodies' reach", |h, r| -> anyhow::Result<()> {
+                        let t = Instant::now();
+                        session.check_message(&names::BODY_REACH, h, step, r)?;
+                        solver.contact_points(r, points_buf);
+                        *inside = t.elapsed();
+                        Ok(())
+                    })?
+                })?;
                 send(points, header, points_buf, checksums)?;
-                session.recv(forces, "the contact forces on the points", |h, f| -> anyhow::Result<()> {
-                    session.check_message(&names::POINT_FORCES, h, step, f)?;
-                    solver.take_contact_forces(f)
-                })?
+                timed_recv(&mut |inside| {
+                    session.recv(forces, "the contact forces on the points", |h, f| -> anyhow::Result<()> {
+                        let t = Instant::now();
+                        session.check_message(&names::POINT_FORCES, h, step, f)?;
+                        solver.take_contact_forces(f)?;
+                        *inside = t.elapsed();
+                        Ok(())
+                    })?
+                })?;
             }
         }
+        Ok(waited)
     }
 }
 
@@ -522,7 +546,10 @@ pub fn run<T: Transport, S: Solver>(
         return run_alone(&mut session, scene, opts, &mut solver);
     }
     let mut ports = CoupledPorts::<T>::open(&session, scene)?;
-    session.wait_until("the coupler, the oracle and the launcher", |_| ports.connected())?;
+    session.wait_until(
+        "the coupler, the oracle (if any), the other solver's contact ports (rigid bodies and a continuum) and the launcher",
+        |_| ports.connected(),
+    )?;
     let zones = ports.initial_zones(&session, scene)?;
     let mut solver = make(&zones)?;
     resume(&mut solver)?;
@@ -632,11 +659,13 @@ impl<T: Transport> CoupledPorts<T> {
     ) -> anyhow::Result<()> {
         let compute_start = Instant::now();
         self.apply_commands(window, solver)?;
+        let mut contact_wait = Duration::ZERO;
         if let Some(c) = &mut self.contact {
-            c.exchange(session, window, solver, opts.checksums)?;
+            contact_wait = c.exchange(session, window, solver, opts.checksums)?;
         }
         let sent_checksum = self.send_raster(session, window, solver, opts.checksums)?;
-        let mut compute = compute_start.elapsed();
+        let mut compute = compute_start.elapsed() - contact_wait;
+        wait += contact_wait;
 
         let wait_start = Instant::now();
         let finish_time = self.finish(session, window, solver)?;

@@ -197,6 +197,9 @@ pub struct MpmPipeline<S: MpmSpace> {
     pub time: f64,
     pub times: PhaseTimes,
     steps: u64,
+    /// The material's force on each of `params.walls` over the last grid update [N] (2D: N/m):
+    /// minus the momentum the wall took from its nodes, over dt.
+    pub wall_loads: Vec<S::V>,
 }
 
 impl<S: MpmSpace> MpmPipeline<S> {
@@ -301,6 +304,7 @@ impl<S: MpmSpace> MpmPipeline<S> {
             time: 0.0,
             times: PhaseTimes::default(),
             steps: 0,
+            wall_loads: Vec::new(),
         })
     }
 
@@ -409,12 +413,15 @@ impl<S: MpmSpace> MpmPipeline<S> {
     fn update_grid(&mut self, params: &MpmParams<S>, dt: f64) -> Result<(), StepError> {
         reset(&mut self.velocity, self.map.len());
         let (map, nodes, time) = (&self.map, &self.nodes, self.time);
-        let bad = self
+        let walls = params.walls.len();
+        // Per chunk, in chunk order: the same sums for any thread count.
+        let chunks: Vec<(Option<[i64; 3]>, Vec<S::V>)> = self
             .velocity
             .par_chunks_mut(POINT_TASK)
             .enumerate()
             .map(|(c, vel)| {
                 let mut bad = None;
+                let mut taken = vec![S::V::default(); walls];
                 for (k, out) in vel.iter_mut().enumerate() {
                     let i = c * POINT_TASK + k;
                     let node = &nodes[i];
@@ -424,19 +431,25 @@ impl<S: MpmSpace> MpmPipeline<S> {
                     let inv_m = 1.0 / node.mass;
                     out.old = node.momentum * inv_m;
                     let mut v = (node.momentum + node.force * dt) * inv_m + params.gravity * dt;
-                    if params.domain_walls.is_some() || !params.walls.is_empty() {
-                        v = apply_walls(params, map.ijk(i), v, time);
+                    if params.domain_walls.is_some() || walls > 0 {
+                        v = apply_walls(params, map.ijk(i), v, time, node.mass, &mut taken);
                     }
                     if !v.is_finite() && bad.is_none() {
                         bad = Some(map.ijk(i));
                     }
                     out.v = v;
                 }
-                bad
+                (bad, taken)
             })
-            .find_any(|b| b.is_some())
-            .flatten();
-        match bad {
+            .collect();
+        self.wall_loads.clear();
+        self.wall_loads.resize(walls, S::V::default());
+        for (_, taken) in &chunks {
+            for (load, t) in self.wall_loads.iter_mut().zip(taken) {
+                *load += *t * (1.0 / dt);
+            }
+        }
+        match chunks.iter().find_map(|c| c.0) {
             Some(ijk) => Err(StepError::NotFinite {
                 phase: Phase::GridUpdate,
                 what: format!("the velocity of grid node {:?}", &ijk[..S::DIM]),
@@ -604,8 +617,10 @@ impl<S: MpmSpace> MpmPipeline<S> {
     }
 }
 
+/// The node's velocity after the domain's walls and the scene's; `taken[w]` gains the
+/// momentum wall `w` took from it (its load on the wall over the step).
 #[inline]
-fn apply_walls<S: MpmSpace>(params: &MpmParams<S>, ijk: [i64; 3], v: S::V, time: f64) -> S::V {
+fn apply_walls<S: MpmSpace>(params: &MpmParams<S>, ijk: [i64; 3], v: S::V, time: f64, mass: f64, taken: &mut [S::V]) -> S::V {
     let mut v = v;
     if let Some(contact) = params.domain_walls {
         // No wall across a periodic axis.
@@ -624,8 +639,10 @@ fn apply_walls<S: MpmSpace>(params: &MpmParams<S>, ijk: [i64; 3], v: S::V, time:
     }
     if !params.walls.is_empty() {
         let x = S::from_array(params.grid.position(ijk));
-        for w in &params.walls {
-            v = w.apply(x, v, time);
+        for (w, taken) in params.walls.iter().zip(taken) {
+            let after = w.apply(x, v, time);
+            *taken += (v - after) * mass;
+            v = after;
         }
     }
     v

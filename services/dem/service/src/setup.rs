@@ -120,8 +120,8 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
         return Err(format!(
             "the macro-step run.dt = {:.3e} s is above the limit of the rigid bodies' contact with the material points \
              (Jiang 2020 eq. 51): 2π κ₂ √(m / k_n) = {limit:.3e} s with κ₂ = {CONTACT_KAPPA}, k_n = {k:.4e} N/m of the stiffest rigid \
-             body and the lightest point's mass m = {m:.4e} kg; lower run.dt or soften the body's stiffness_normal (fewer \
-             mpm.points_per_axis also make heavier points)",
+             body and the lighter side's mass m = {m:.4e} kg (the lightest point, or a free body's effective mass); lower run.dt \
+             or soften the body's stiffness_normal (fewer mpm.points_per_axis also make heavier points)",
             scene.dt
         ));
     }
@@ -130,16 +130,28 @@ pub fn check_time_step(scene: &Scene) -> Result<(), String> {
 
 /// Jiang 2020 eq. 51's contact term: a material point meets a rigid body once per macro-step,
 /// so the step must resolve the contact's vibration, Δt ≤ 2π κ₂ √(m / k_n) with κ₂ = 0.1 (the
-/// paper's value) and m the lightest material point (the lighter side of the contact).
+/// paper's value) and m the lighter side of a contact: the lightest material point, or a free
+/// body's effective mass at its farthest point, 1 / (1/m + R²/I), if that is lighter.
 pub const CONTACT_KAPPA: f64 = 0.1;
 
 /// The largest macro-step the contacts of material points with the rigid bodies allow (eq. 51),
-/// with the stiffness and the point mass it comes from; `None` without contact coupling.
+/// with the stiffness and the mass it comes from; `None` without contact coupling.
 pub fn contact_step(scene: &Scene) -> Option<(f64, f64, f64)> {
     if !scene.contact_coupling() {
         return None;
     }
-    let m = scene.point_mass()?;
+    let bodies = scene
+        .rigids
+        .iter()
+        .filter(|r| r.motion == grains_protocol::scene::RigidMotion::Free)
+        .map(|r| {
+            let vertices: Vec<DVec2> = r.vertices.iter().map(|&[x, y]| DVec2::new(x, y)).collect();
+            let props = grains_dem::bodies::mass_properties(&vertices, r.radius);
+            let reach = vertices.iter().map(|&v| (v - props.centroid).length()).fold(0.0, f64::max) + r.radius;
+            let rho = scene.materials[r.material].density;
+            1.0 / (1.0 / (rho * props.area) + reach * reach / (rho * props.second_moment))
+        });
+    let m = bodies.fold(scene.point_mass()?, f64::min);
     scene
         .rigids
         .iter()

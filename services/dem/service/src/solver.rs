@@ -12,6 +12,7 @@ use grains_protocol::wire::{
     BodyReach, Command, ContactPoint, Control, EpochItem, NodeStress, NodeVelocity, Param, PointForce, RasterNode, ViewPoint, Zone,
 };
 use grains_service::solver::{EpochChanges, Solver, SolverReport, StepWindow, set_component, view_stride};
+use grains_service::step_log::StepLog;
 
 pub struct DemSolver<S: Space> {
     pub state: DemState<S>,
@@ -164,42 +165,6 @@ impl<S: Space> DemSolver<S> {
             );
         }
         Ok(())
-    }
-}
-
-/// A CSV of one row per macro-step (`walls.csv`, `bodies.csv`), flushed every row: a run
-/// resumed from a checkpoint finds every row up to it.
-struct StepLog(std::io::BufWriter<std::fs::File>);
-
-impl StepLog {
-    /// A new log with the columns `step,time` + `columns`; or, resuming after a step, the
-    /// existing one with its rows up to that step kept, open to append.
-    fn open(path: &std::path::Path, columns: &str, resume: Option<u64>) -> std::io::Result<StepLog> {
-        use std::io::Write as _;
-        let Some(step) = resume else {
-            let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
-            writeln!(f, "step,time{columns}")?;
-            return Ok(StepLog(f));
-        };
-        let text = std::fs::read_to_string(path)?;
-        let mut kept = String::new();
-        for (k, line) in text.lines().enumerate() {
-            let row_step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
-            if k == 0 || row_step.is_some_and(|s| s <= step) {
-                kept.push_str(line);
-                kept.push('\n');
-            }
-        }
-        std::fs::write(path, kept)?;
-        Ok(StepLog(std::io::BufWriter::new(
-            std::fs::OpenOptions::new().append(true).open(path)?,
-        )))
-    }
-
-    fn row(&mut self, row: &str) -> std::io::Result<()> {
-        use std::io::Write as _;
-        writeln!(self.0, "{row}")?;
-        self.0.flush()
     }
 }
 
@@ -505,6 +470,28 @@ impl<S: Space> Solver for DemSolver<S> {
     /// external load through the step's substeps.
     fn contact_forces(&mut self, window: &StepWindow, points: &[ContactPoint], out: &mut Vec<PointForce>) -> anyhow::Result<()> {
         use glam::DVec2;
+        let finite = |p: &ContactPoint| p.position.iter().chain(&p.velocity).all(|c| c.is_finite());
+        if let Some(p) = points.iter().find(|p| !(p.mass > 0.0 && p.radius > 0.0 && finite(p))) {
+            bail!(
+                "{}: step {}: point {} has mass {}, contact radius {} (both must be > 0), position {:?} and velocity {:?} (finite)",
+                grains_protocol::names::CONTACT_POINTS.name,
+                window.step,
+                p.id,
+                p.mass,
+                p.radius,
+                p.position,
+                p.velocity
+            );
+        }
+        if let Some(w) = points.windows(2).find(|w| w[1].index <= w[0].index) {
+            bail!(
+                "{}: step {}: point indices {} then {}: they must increase",
+                grains_protocol::names::CONTACT_POINTS.name,
+                window.step,
+                w[0].index,
+                w[1].index
+            );
+        }
         let disks: Vec<grains_dem::bodies::GrainView> = points
             .iter()
             .enumerate()
@@ -519,16 +506,6 @@ impl<S: Space> Solver for DemSolver<S> {
                 id: p.id,
             })
             .collect();
-        if let Some(p) = points.iter().find(|p| !(p.mass > 0.0 && p.radius > 0.0)) {
-            bail!(
-                "{}: step {}: point {} has mass {} and contact radius {} (both must be > 0)",
-                grains_protocol::names::CONTACT_POINTS.name,
-                window.step,
-                p.id,
-                p.mass,
-                p.radius
-            );
-        }
         let mut forces = grains_dem::bodies::point_forces(
             &mut self.state.bodies,
             &disks,

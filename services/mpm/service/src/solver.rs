@@ -37,11 +37,16 @@ pub struct MpmSolver<S: MpmSpace> {
     grains: bool,
     /// Contact radius r_p of a point against a rigid body [m].
     contact_radius: f64,
-    /// The rigid bodies' forces on the points appended to `points.loads` for the current
-    /// step (taken off after it).
-    contact_loads: usize,
+    /// The points sent to the DEM this step (their indices, increasing), and the number of
+    /// dead loads before the contact forces were appended to `points.loads` for the step
+    /// (they are taken off after it).
+    sent: Vec<u64>,
+    dead_loads: Option<usize>,
     /// Energy the rigid bodies can bring [J] (for the runaway bound).
     rigid_energy: f64,
+    /// The material's load on each scene wall per macro-step (`walls.csv`, `walls_mpm.csv`
+    /// beside a DEM).
+    walls_log: Option<grains_service::step_log::StepLog>,
 }
 
 /// What a checkpoint holds of the MPM (see [`Solver::save`]): the points, what commands may
@@ -74,6 +79,26 @@ impl<S: MpmSpace> MpmSolver<S> {
             Some(dir) if scene.output.frames_every > 0 => Some((PointFrames::open(dir, "points", resume)?, scene.output.frames_every)),
             _ => None,
         };
+        let walls_log = match out_dir {
+            Some(dir) if !params.walls.is_empty() => {
+                // Beside a DEM, whose grains' loads are walls.csv.
+                let name = if scene.participants().contains(&grains_protocol::Role::Dem) {
+                    "walls_mpm.csv"
+                } else {
+                    "walls.csv"
+                };
+                let columns: String = params
+                    .walls
+                    .iter()
+                    .map(|w| {
+                        let k = w.id;
+                        format!(",wall{k}_fx,wall{k}_fy,wall{k}_fz,wall{k}_x,wall{k}_y,wall{k}_z")
+                    })
+                    .collect();
+                Some(grains_service::step_log::StepLog::open(&dir.join(name), &columns, resume)?)
+            }
+            _ => None,
+        };
         let mut solver = MpmSolver {
             points,
             params,
@@ -92,8 +117,10 @@ impl<S: MpmSpace> MpmSolver<S> {
             resumed: resume,
             grains: scene.bodies.iter().any(|b| b.model != grains_protocol::scene::Model::Mpm),
             contact_radius: scene.contact_radius(),
-            contact_loads: 0,
+            sent: Vec::new(),
+            dead_loads: None,
             rigid_energy,
+            walls_log,
         };
         if resume.is_none() {
             solver.write_frame(0)?;
@@ -199,10 +226,10 @@ fn step_failed(step: u64, time: f64, e: impl std::fmt::Display) -> anyhow::Error
 impl<S: MpmSpace> MpmSolver<S> {
     /// After a step: runaway energy and frames.
     fn after_step(&mut self, window: &StepWindow) -> anyhow::Result<()> {
-        // The contact forces acted for this step only (the loads kept their order).
-        let dead = self.points.loads.len() - self.contact_loads;
-        self.points.loads.truncate(dead);
-        self.contact_loads = 0;
+        // The contact forces acted for this step only (the step keeps the loads' order).
+        if let Some(dead) = self.dead_loads.take() {
+            self.points.loads.truncate(dead);
+        }
         let (ke, _) = totals(&self.points);
         if ke > self.energy_bound {
             bail!(
@@ -212,6 +239,21 @@ impl<S: MpmSpace> MpmSolver<S> {
                 self.pipeline.time,
                 self.energy_bound
             );
+        }
+        if let Some(log) = &mut self.walls_log {
+            use grains_mpm::boundary::Geometry;
+            let mut row = format!("{},{}", window.step, self.pipeline.time);
+            for (w, f) in self.params.walls.iter().zip(&self.pipeline.wall_loads) {
+                let at = match w.geometry {
+                    Geometry::Plane { point, .. } => point,
+                    Geometry::Box { min, .. } => min,
+                    Geometry::Segment { from, .. } => from,
+                    Geometry::Drum { center, .. } => center,
+                };
+                let (f, at) = (S::to_array(*f), S::to_array(at + w.shift + w.velocity * self.pipeline.time));
+                row.push_str(&format!(",{},{},{},{},{},{}", f[0], f[1], f[2], at[0], at[1], at[2]));
+            }
+            log.row(&row)?;
         }
         if let Some((_, every)) = &self.frames
             && window.step.is_multiple_of(*every)
@@ -289,9 +331,11 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
                 d2 <= (b.reach + r_p).powi(2)
             })
         };
+        self.sent.clear();
         for k in 0..p.len() {
             let x = S::to_array(p.x[k]);
             if near(x) {
+                self.sent.push(k as u64);
                 out.push(ContactPoint {
                     index: k as u64,
                     id: p.id[k],
@@ -307,19 +351,23 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
     /// Jiang 2020 eq. 46–48: a body's contact force on a point is a load on it for the step,
     /// spread to its nodes with its weights.
     fn take_contact_forces(&mut self, forces: &[PointForce]) -> anyhow::Result<()> {
-        let n = self.points.len() as u64;
-        if let Some(f) = forces.iter().find(|f| f.index >= n || !f.force.iter().all(|c| c.is_finite())) {
-            bail!(
-                "{}: a force {:?} on point index {} (the MPM has {n} points): not a point it sent, or not finite",
-                grains_protocol::names::POINT_FORCES.name,
-                f.force,
-                f.index
-            );
+        // Each on a point sent this step, in increasing order, once.
+        let mut sent = self.sent.iter().peekable();
+        for f in forces {
+            while sent.next_if(|&&k| k < f.index).is_some() {}
+            if sent.next_if(|&&k| k == f.index).is_none() || !f.force.iter().all(|c| c.is_finite()) {
+                bail!(
+                    "{}: a force {:?} on point index {}: not a point the MPM sent this step, out of order, twice, or not finite",
+                    grains_protocol::names::POINT_FORCES.name,
+                    f.force,
+                    f.index
+                );
+            }
         }
+        self.dead_loads = Some(self.points.loads.len());
         self.points
             .loads
             .extend(forces.iter().map(|f| (f.index as usize, S::from_array(f.force))));
-        self.contact_loads = forces.len();
         Ok(())
     }
 

@@ -70,3 +70,49 @@ fn a_velocity_on_a_node_without_material_is_refused() {
         .unwrap_err();
     assert!(err.to_string().contains("no material"), "{err}");
 }
+
+/// Contact coupling (protocol §3.11): the MPM sends the points within a body's reach plus r_p,
+/// and takes back forces only on points it sent, each once and in order; a force it takes acts
+/// for one step and is gone after it (the scene's own dead loads stay).
+#[test]
+fn contact_forces_act_on_points_sent_for_one_step_only() {
+    use grains_protocol::wire::{BodyReach, PointForce};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../tests/scenes/mpm_on_rigid_2d.toml");
+    let s = scene::load(&path).expect("test scene");
+    let mut m = solver(&s);
+    let dead = m.points.loads.len();
+    // A reach circle around the block's lower left corner.
+    let reach = [BodyReach {
+        id: 0,
+        center: [0.0, 0.0, 0.0],
+        reach: 0.002,
+    }];
+    let mut sent = Vec::new();
+    m.contact_points(&reach, &mut sent);
+    let r_p = s.contact_radius();
+    let within = |x: &<D2 as grains_grid::Space>::V| x.length() <= 0.002 + r_p;
+    assert_eq!(sent.len(), m.points.x.iter().filter(|x| within(x)).count());
+    assert!(!sent.is_empty() && sent.windows(2).all(|w| w[0].index < w[1].index));
+    assert!(sent.iter().all(|p| p.radius == r_p && p.mass == m.points.mass[p.index as usize]));
+    let force = |index| PointForce {
+        index,
+        force: [0.0, 1e-3, 0.0],
+    };
+    let unsent = (0..m.points.len() as u64).find(|k| sent.iter().all(|p| p.index != *k)).unwrap();
+    for bad in [
+        vec![force(unsent)],
+        vec![force(sent[0].index), force(sent[0].index)],
+        vec![PointForce {
+            force: [f64::NAN, 0.0, 0.0],
+            ..force(sent[0].index)
+        }],
+    ] {
+        let err = m.take_contact_forces(&bad).unwrap_err().to_string();
+        assert!(err.contains("not a point the MPM sent"), "{err}");
+    }
+    assert_eq!(m.points.loads.len(), dead, "a refused list adds nothing");
+    m.take_contact_forces(&[force(sent[0].index), force(sent[1].index)]).unwrap();
+    assert_eq!(m.points.loads.len(), dead + 2);
+    m.step_alone(&StepWindow::of(&s, 1)).unwrap();
+    assert_eq!(m.points.loads.len(), dead, "the contact forces acted for one step");
+}
