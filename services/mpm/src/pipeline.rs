@@ -171,6 +171,10 @@ struct Acc<S: Space> {
     force: S::V,
 }
 
+/// What a chunk of the grid update found: its first non-finite node, and the momentum each
+/// wall took from its nodes.
+type ChunkUpdate<S> = (Option<[i64; 3]>, Vec<<S as Space>::V>);
+
 /// A node's velocity after phase 1 and before the force update (FLIP needs both).
 #[derive(Clone, Copy, Debug, Default)]
 struct Vel<S: Space> {
@@ -415,7 +419,7 @@ impl<S: MpmSpace> MpmPipeline<S> {
         let (map, nodes, time) = (&self.map, &self.nodes, self.time);
         let walls = params.walls.len();
         // Per chunk, in chunk order: the same sums for any thread count.
-        let chunks: Vec<(Option<[i64; 3]>, Vec<S::V>)> = self
+        let chunks: Vec<ChunkUpdate<S>> = self
             .velocity
             .par_chunks_mut(POINT_TASK)
             .enumerate()
