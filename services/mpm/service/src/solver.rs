@@ -32,9 +32,9 @@ pub struct MpmSolver<S: MpmSpace> {
     weight: f64,
     /// The step a resumed run started after (its outputs continue from there).
     resumed: Option<u64>,
-    /// Whether the run has grains, which the coupler meets on the grid (else the raster goes
-    /// out empty: rigid bodies meet the points by contact).
-    grains: bool,
+    /// Whether the raster goes out empty: in a run of rigid bodies and a continuum (no grains),
+    /// where nothing meets on the grid.
+    no_raster: bool,
     /// Contact radius r_p of a point against a rigid body [m].
     contact_radius: f64,
     /// The points sent to the DEM this step (their indices, increasing), and the number of
@@ -115,7 +115,7 @@ impl<S: MpmSpace> MpmSolver<S> {
                 .unwrap_or(1.0),
             weight: scene.coupling.weight,
             resumed: resume,
-            grains: scene.bodies.iter().any(|b| b.model != grains_protocol::scene::Model::Mpm),
+            no_raster: scene.contact_coupling(),
             contact_radius: scene.contact_radius(),
             sent: Vec::new(),
             dead_loads: None,
@@ -274,7 +274,7 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             .map_err(|e| step_failed(window.step, time, e))?;
         let grid = self.params.grid;
         self.raster.clear();
-        if !self.grains {
+        if self.no_raster {
             return Ok(0);
         }
         self.pipeline.for_each_node_mut(|ijk, mass, v| {
