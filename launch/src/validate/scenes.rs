@@ -44,4 +44,10 @@ pub mod sdem {
     /// §5.2.1: an MPM block at rest on a fixed slab (`rigid.0`), and its grids [m].
     pub const BLOCK: &str = "sdem_block_rest_2d.toml";
     pub const GRIDS: [f64; 4] = [0.002, 0.0025, 0.003, 0.004];
+    /// §5.3: MPM sand in a silo on two fixed slabs (`rigid.0` left, `rigid.1` right of the
+    /// orifice; top faces at the silo's bottom [`super::silo::BOTTOM`], centred on
+    /// [`super::silo::CENTRE`], sphero-radius [`SLAB_RADIUS`]), and its orifices [m].
+    pub const SILO: &str = "sdem_silo_2d.toml";
+    pub const SLAB_RADIUS: f64 = 0.0005;
+    pub const ORIFICES: [f64; 5] = [0.004, 0.006, 0.008, 0.010, 0.012];
 }

@@ -7,11 +7,14 @@
 //!   hard and ten times softer, against the paper's 99.2% and 92.2%;
 //! - §5.2.1: an elastic block comes to rest on a fixed rigid slab; the slab's force against the
 //!   block's weight on four grids (statics, 1%: the force does not depend on the grid), beside
-//!   the same block on a grid-node wall (the MPM alone), and the cost of a step of each.
+//!   the same block on a grid-node wall (the MPM alone), and the cost of a step of each;
+//! - §5.3: MPM sand discharging from a silo whose bottom is two rigid slabs, over five
+//!   orifices: Beverloo's law fitted, against the paper's C = 0.58, k_c = 2.2 (in r_p).
 
 use super::args::ValidateArgs;
 use super::runs::{finished, load_with};
-use super::scenes::sdem::{BLOCK, DISK, GRIDS, SOFTER};
+use super::scenes::sdem::{BLOCK, DISK, GRIDS, ORIFICES, SILO, SLAB_RADIUS, SOFTER};
+use super::scenes::silo::{BOTTOM, CENTRE, D};
 use crate::metrics::MetricsTable;
 use crate::report::Part;
 use grains_dem::space::{D2, Space};
@@ -21,6 +24,9 @@ use std::path::Path;
 /// The paper's shares of the ideal kinetic energy (§5.1.1: hard, soft disk).
 const PAPER_HARD: f64 = 0.99202;
 const PAPER_SOFT: f64 = 0.9216;
+/// The silo's discharge-rate window [s]: after the start-up, while the silo is still filled
+/// higher than 2.5 times its widest orifice.
+const SILO_WINDOW: (f64, f64) = (0.05, 0.25);
 /// Statics: the slab carries the block's weight to this share.
 const REST_TOLERANCE: f64 = 0.01;
 
@@ -35,6 +41,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let mut md = String::from("## Rigid bodies in contact with a continuum (Jiang 2020 §5)\n\n");
     disk_impact(args, &mut part, &mut md)?;
     block_at_rest(args, &mut part, &mut md)?;
+    silo(args, &mut part, &mut md)?;
     part.md = md;
     Ok(part)
 }
@@ -182,5 +189,74 @@ fn block_at_rest(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyho
             coupled / alone
         );
     }
+    Ok(())
+}
+
+/// Jiang 2020 §5.3 (Fig. 16): the discharge rate over five orifices (the slabs' inner ends
+/// moved), fitted by Beverloo's 2D law W = C ρ_b √g (w − k_c r_p)^{3/2}.
+fn silo(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
+    let path = args.scenes.join(SILO);
+    let scene = load_with(&path, &[])?;
+    let mat = &scene.materials[0];
+    let rho_b = mat.density * mat.mpm.as_ref().map_or(1.0, |m| m.packing);
+    let (g, r_p) = (scene.gravity[1].abs(), scene.contact_radius());
+    let _ = writeln!(
+        md,
+        "### §5.3: a silo on rigid slabs\n\n`{SILO}`: calibrated MPM sand (ρ_b = {rho_b:.0} kg/m³, 1-mm cells, r_p = {:.1} mm) \
+         discharging through the orifice between two fixed rigid slabs (contact by points), over orifices of {} mm. Measured: \
+         the discharge rate W, the slope of the mass below the bottom over {:.2}–{:.2} s. Reference: Beverloo's law in 2D, \
+         W = C ρ_b √g (w − k_c r_p)^3/2, which the paper fits with C = 0.58, k_c = 2.2 (Fig. 16).\n\n| orifice [mm] | W \
+         [kg/(m s)] | wall s |\n|---:|---:|---:|",
+        r_p * 1e3,
+        ORIFICES.map(|w| format!("{:.0}", w * 1e3)).join(", "),
+        SILO_WINDOW.0,
+        SILO_WINDOW.1
+    );
+    let mut rates = Vec::new();
+    for w in ORIFICES {
+        // The slabs' rounded inner ends at CENTRE ∓ w / 2.
+        let (left, right) = (CENTRE - w / 2.0 - SLAB_RADIUS, CENTRE + w / 2.0 + SLAB_RADIUS);
+        let (lo, hi) = (BOTTOM - 0.005, BOTTOM - SLAB_RADIUS);
+        let overrides = vec![
+            format!("rigid.0.vertices=[[-0.001,{lo}],[{left},{lo}],[{left},{hi}],[-0.001,{hi}]]"),
+            format!("rigid.1.vertices=[[{right},{lo}],[0.041,{lo}],[0.041,{hi}],[{right},{hi}]]"),
+        ];
+        let run = finished(args, &path, overrides)?;
+        let (discharged, _) = super::silo::discharge(&run.dir, w)?;
+        let window: Vec<(f64, f64)> = discharged
+            .into_iter()
+            .filter(|p| (SILO_WINDOW.0..=SILO_WINDOW.1).contains(&p.0))
+            .collect();
+        let rate = super::stats::slope(&window);
+        let _ = writeln!(md, "| {:.0} | {rate:.4} | {:.1} |", w * 1e3, run.wall);
+        rates.push((w, rate));
+    }
+    let flowing: Vec<(f64, f64)> = rates.iter().copied().filter(|&(_, q)| q > 0.0).collect();
+    if flowing.len() < 3 {
+        part.check(
+            "MPM silo on rigid slabs: Beverloo's law",
+            "Jiang 2020 §5.3",
+            format!("{} of {} orifices flowed", flowing.len(), rates.len()),
+            "≥ 3 flowing",
+            false,
+        );
+        return Ok(());
+    }
+    // `beverloo` gives k in grain diameters D; the paper's k_c is in r_p.
+    let (c, k, worst) = super::silo::beverloo(&flowing, rho_b, g);
+    let k_c = k * D / r_p;
+    let _ = writeln!(
+        md,
+        "\nBeverloo fit over the flowing orifices: C = {c:.3}, k_c = {k_c:.2} (in r_p; the paper 0.58 and 2.2), largest \
+         residual {:.1}%.\n",
+        100.0 * worst
+    );
+    part.check(
+        "MPM silo on rigid slabs: the discharge follows Beverloo's law",
+        "Jiang 2020 §5.3, Fig. 16 (C = 0.58, k_c = 2.2)",
+        format!("C = {c:.3}, k_c = {k_c:.2}, largest residual {:.1}%", 100.0 * worst),
+        "residual ≤ 10%",
+        worst <= 0.1,
+    );
     Ok(())
 }

@@ -197,7 +197,7 @@ pub fn run_silo(
 
 /// The mass below the silo's bottom in every frame of a run, and the share of the bin's
 /// grains in flight over the fit window's frames.
-fn discharge(dir: &Path, orifice: f64) -> anyhow::Result<(Vec<(f64, f64)>, f64)> {
+pub fn discharge(dir: &Path, orifice: f64) -> anyhow::Result<(Vec<(f64, f64)>, f64)> {
     let mut discharged = Vec::new();
     let (mut flown, mut counted) = (0usize, 0usize);
     let grain_frames = frames_of(dir, "grains")?;

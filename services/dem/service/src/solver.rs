@@ -70,7 +70,9 @@ impl<S: Space> DemSolver<S> {
         let log = |name: &str, header: String| -> std::io::Result<Option<StepLog>> {
             out_dir.map(|dir| StepLog::open(&dir.join(name), &header, resume)).transpose()
         };
-        let walls_log = match state.walls.is_empty() {
+        // The grains' loads: none without grains (the walls' loads of a continuum are the MPM's).
+        let grains = scene.bodies.iter().any(|b| b.model != Model::Mpm);
+        let walls_log = match state.walls.is_empty() || !grains {
             true => None,
             false => log(
                 "walls.csv",

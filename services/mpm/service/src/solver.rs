@@ -45,7 +45,7 @@ pub struct MpmSolver<S: MpmSpace> {
     /// Energy the rigid bodies can bring [J] (for the runaway bound).
     rigid_energy: f64,
     /// The material's load on each scene wall per macro-step (`walls.csv`, `walls_mpm.csv`
-    /// beside a DEM).
+    /// beside grains).
     walls_log: Option<grains_service::step_log::StepLog>,
 }
 
@@ -81,8 +81,8 @@ impl<S: MpmSpace> MpmSolver<S> {
         };
         let walls_log = match out_dir {
             Some(dir) if !params.walls.is_empty() => {
-                // Beside a DEM, whose grains' loads are walls.csv.
-                let name = if scene.participants().contains(&grains_protocol::Role::Dem) {
+                // Beside grains, whose loads are the DEM's walls.csv.
+                let name = if scene.bodies.iter().any(|b| b.model != grains_protocol::scene::Model::Mpm) {
                     "walls_mpm.csv"
                 } else {
                     "walls.csv"
