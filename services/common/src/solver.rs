@@ -348,7 +348,7 @@ impl<T: Transport> ContactPorts<T> {
             } => {
                 reach_buf.clear();
                 solver.body_reach(reach_buf);
-                send(reach, header, reach_buf, checksums)?;
+                publish_slice(reach, header, reach_buf, checksums)?;
                 forces_buf.clear();
                 timed_recv(&mut |inside| {
                     session.recv(points, "the material points near the bodies", |h, p| -> anyhow::Result<()> {
@@ -359,7 +359,7 @@ impl<T: Transport> ContactPorts<T> {
                         Ok(())
                     })?
                 })?;
-                send(forces, header, forces_buf, checksums)?;
+                publish_slice(forces, header, forces_buf, checksums)?;
             }
             ContactPorts::Mpm {
                 reach,
@@ -377,7 +377,7 @@ impl<T: Transport> ContactPorts<T> {
                         Ok(())
                     })?
                 })?;
-                send(points, header, points_buf, checksums)?;
+                publish_slice(points, header, points_buf, checksums)?;
                 timed_recv(&mut |inside| {
                     session.recv(forces, "the contact forces on the points", |h, f| -> anyhow::Result<()> {
                         let t = Instant::now();
@@ -394,7 +394,7 @@ impl<T: Transport> ContactPorts<T> {
 }
 
 /// Publishes `items` with `header` (and their checksum).
-fn send<E: grains_transport::Pod + grains_transport::ZeroCopy>(
+pub fn publish_slice<E: grains_transport::Pod + grains_transport::ZeroCopy>(
     publisher: &mut impl Publisher<E, StepHeader>,
     header: StepHeader,
     items: &[E],

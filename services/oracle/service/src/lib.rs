@@ -15,14 +15,14 @@
 use anyhow::bail;
 use grains_grid::{D2, D3};
 use grains_oracle::epoch::{self, Grain, Point, Settings};
+use grains_protocol::Role;
 use grains_protocol::names;
 use grains_protocol::scene::{Dimension, Model, OracleKind, Scene};
 use grains_protocol::wire::{EpochItem, NodeStress, PointScale, SpawnGrain, SpawnPoint, StepBegin, StepHeader, Summary, Zone, ZoneCell};
-use grains_protocol::{Role, checksum::checksum_bytes};
 use grains_service::session::Session;
-use grains_service::solver::{ParticipantOptions, SolverReport, StepWindow, join, next_step, publish_summary};
+use grains_service::solver::{ParticipantOptions, SolverReport, StepWindow, join, next_step, publish_slice, publish_summary};
 use grains_service::zones::ZoneField;
-use grains_transport::{Publisher, Subscriber, Transport, as_bytes};
+use grains_transport::{Publisher, Subscriber, Transport};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
@@ -127,7 +127,7 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
     // Both solvers are subscribed: they build their grains and points from this field before
     // they declare themselves ready.
     let header = session.header(0, 0.0, scene.dt);
-    publish_zones(&mut zones_pub, header, cells, opts.checksums)?;
+    publish_slice(&mut zones_pub, header, cells, opts.checksums)?;
     session.ready()?;
 
     let mut report = SolverReport {
@@ -166,22 +166,6 @@ pub fn run<T: Transport>(transport: &T, scene: &Scene, opts: &ParticipantOptions
         publish_summary(&session, &mut summary_pub, &window, &report, compute, wait)?;
         compute = Duration::ZERO;
     }
-}
-
-fn publish_zones<P: Publisher<ZoneCell, StepHeader>>(
-    zones_pub: &mut P,
-    header: StepHeader,
-    cells: &[ZoneCell],
-    checksums: bool,
-) -> anyhow::Result<()> {
-    zones_pub.publish(cells.len(), |h, out| {
-        out.copy_from_slice(cells);
-        *h = header;
-        if checksums {
-            h.checksum = checksum_bytes(as_bytes(out));
-        }
-    })?;
-    Ok(())
 }
 
 /// What one epoch sends: the zones (non-discrete cells) and each solver's lists, and the
@@ -449,23 +433,13 @@ impl<T: Transport> Epochs<T> {
         let t = Instant::now();
         let m = self.state.epoch(scene, window.time + window.dt, &grains, &stress, &points);
         let header = session.header(step, window.time, window.dt);
-        publish_zones(zones_pub, header, &m.zones, checksums)?;
-        fn send<E: grains_transport::Pod + Copy, P: Publisher<E, StepHeader>>(
-            p: &mut P,
-            header: StepHeader,
-            items: &[E],
-        ) -> anyhow::Result<()> {
-            p.publish(items.len(), |h, out| {
-                *h = header;
-                out.copy_from_slice(items);
-            })?;
-            Ok(())
-        }
-        send(&mut self.delete_grains, header, &m.delete_grains)?;
-        send(&mut self.delete_points, header, &m.delete_points)?;
-        send(&mut self.spawn_grains, header, &m.spawn_grains)?;
-        send(&mut self.spawn_points, header, &m.spawn_points)?;
-        send(&mut self.scale_points, header, &m.scale_points)?;
+        publish_slice(zones_pub, header, &m.zones, checksums)?;
+        // The five lists carry no checksum (§3.10).
+        publish_slice(&mut self.delete_grains, header, &m.delete_grains, false)?;
+        publish_slice(&mut self.delete_points, header, &m.delete_points, false)?;
+        publish_slice(&mut self.spawn_grains, header, &m.spawn_grains, false)?;
+        publish_slice(&mut self.spawn_points, header, &m.spawn_points, false)?;
+        publish_slice(&mut self.scale_points, header, &m.scale_points, false)?;
         report.mass = m.mass_before;
         report.momentum = m.momentum_before;
         report.n_items = m.zones.len() as u64;
