@@ -139,6 +139,12 @@ pub fn run_id(stderr: &str) -> String {
     run_line(stderr).split_whitespace().nth(3).expect("run id").to_string()
 }
 
+/// The physics of a finished run's `metrics.csv`: its rows without the timing columns (equal
+/// between two runs of the same physics, whatever the transport).
+pub fn physics(run_dir: &Path) -> String {
+    grains_launch::metrics::physics_columns(&std::fs::read_to_string(run_dir.join("metrics.csv")).unwrap())
+}
+
 /// The output directory of a run from the launcher's first line.
 pub fn run_dir(stderr: &str) -> PathBuf {
     PathBuf::from(run_line(stderr).rsplit("output in ").next().expect("output dir").trim())

@@ -139,8 +139,6 @@ fn refused_and_malformed_commands_change_nothing() {
         (r.wait_exit(Duration::from_secs(120)), r.stderr())
     };
     assert!(status.success(), "{err}");
-    let physics =
-        |dir: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
     let reference = physics(&run_dir(&err));
 
     // Steering off: every command, well-formed or not, is refused.

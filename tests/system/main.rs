@@ -215,9 +215,8 @@ fn two_runs_at_once_do_not_interfere() {
     let (da, db) = (run_dir(&a.stderr()), run_dir(&b.stderr()));
     assert_ne!(da, db);
     // Same scene, so the same physics: anything crossing between the runs would show here.
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
     assert_eq!(metrics(&da).len(), 60);
-    assert_eq!(read(&da), read(&db));
+    assert_eq!(physics(&da), physics(&db));
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -488,8 +487,7 @@ fn a_python_coupler_gives_the_built_in_couplers_metrics_byte_for_byte() {
     let external = run_dir(&launcher.stderr());
     assert_external(&external, "coupler");
 
-    let read = |d: &Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    let (expected, got) = (read(&built_in), read(&external));
+    let (expected, got) = (physics(&built_in), physics(&external));
     assert_eq!(expected.lines().count(), 201, "a header and 200 steps:\n{expected}");
     let shared: u64 = column(&built_in, "coupler_items")[0].parse().unwrap();
     assert!(shared > 0, "the coupler constrained no node");
@@ -667,8 +665,7 @@ fn a_dem_scene_starts_only_the_dem_and_threads_give_the_same_physics() {
 
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(read(&dir), read(&run_dir(&err)));
+    assert_eq!(physics(&dir), physics(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -729,8 +726,7 @@ fn a_fixed_rigid_floor_carries_the_weight_of_the_grains_and_the_free_body_on_it(
         "inproc",
     ]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(read(&dir), read(&run_dir(&err)));
+    assert_eq!(physics(&dir), physics(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -797,8 +793,7 @@ fn rigid_bodies_carry_a_continuum_by_contact_and_threads_give_the_same_bytes() {
     for name in frames(&dir) {
         assert!(same(&name), "{name} differs between processes and threads");
     }
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(read(&dir), read(&threads));
+    assert_eq!(physics(&dir), physics(&threads));
 
     // A macro-step the points' contacts cannot resolve is refused before anything starts
     // (eq. 51: 2π 0.1 √(1.5e-3 kg / 1e6 N/m) = 2.433e-5 s, the point lighter than the square).
@@ -864,8 +859,7 @@ fn an_mpm_scene_starts_only_the_mpm_writes_point_frames_and_threads_give_the_sam
 
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(read(&dir), read(&run_dir(&err)));
+    assert_eq!(physics(&dir), physics(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -928,8 +922,7 @@ fn a_hybrid_scene_runs_coupled_and_processes_match_threads() {
     }
     let (status, err) = run_to_end(&["run", scene, "--out", out_s, "--quiet", "--transport", "inproc"]);
     assert!(status.success(), "{err}");
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(read(&dir), read(&run_dir(&err)));
+    assert_eq!(physics(&dir), physics(&run_dir(&err)));
     std::fs::remove_dir_all(&out).unwrap();
 }
 

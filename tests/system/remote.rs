@@ -104,9 +104,12 @@ fn an_mpm_in_another_network_namespace_gives_the_same_physics_and_its_death_ends
     let remote = run_dir(&launcher.stderr());
     let s = summary(&remote);
     assert_eq!(s["transport"], "zenoh", "{s}");
-    let read = |d: &std::path::Path| grains_launch::metrics::physics_columns(&std::fs::read_to_string(d.join("metrics.csv")).unwrap());
-    assert_eq!(read(&local).lines().count(), 201);
-    assert_eq!(read(&remote), read(&local), "the remote MPM's run differs from the iceoryx2 run");
+    assert_eq!(physics(&local).lines().count(), 201);
+    assert_eq!(
+        physics(&remote),
+        physics(&local),
+        "the remote MPM's run differs from the iceoryx2 run"
+    );
 
     // The remote MPM killed mid-run: the run fails within 2 s, naming it.
     let mut launcher = zenoh_run("run.steps=1000000");

@@ -18,7 +18,7 @@ pub(crate) struct Outputs {
 }
 
 pub(crate) fn outputs(dir: &Path) -> Outputs {
-    let metrics = grains_launch::metrics::physics_columns(&std::fs::read_to_string(dir.join("metrics.csv")).unwrap());
+    let metrics = physics(dir);
     let mut frames: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir.join("frames"))
         .unwrap()
         .flatten()

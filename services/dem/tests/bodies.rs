@@ -2,46 +2,17 @@
 //! step: impacts against the impulse of a restitution e (Newton's law along the normal), a
 //! body at rest on a floor against statics, sliding against Coulomb's law.
 
+mod common;
+
+use common::{law, state};
 use glam::DVec2;
 use grains_dem::bodies::{Body, Motion};
-use grains_dem::contact::{ContactParams, Damping};
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::D2;
-use grains_dem::state::{DemParams, DemState, Domain, Grains, Wall};
+use grains_dem::state::{DemState, Grains, Wall};
 
 const DENSITY: f64 = 2500.0;
 const KN: f64 = 1e7;
-
-fn law(e: f64, mu: f64) -> ContactParams {
-    ContactParams {
-        stiffness_normal: KN,
-        stiffness_tangential: 0.5 * KN,
-        damping: Damping::Restitution(e),
-        friction: mu,
-        cohesion_normal: 0.0,
-        cohesion_tangential: 0.0,
-        damping_scale: 1.0,
-    }
-}
-
-fn state(law: ContactParams, gravity: DVec2, bodies: Vec<Body>, walls: Vec<Wall<D2>>) -> DemState<D2> {
-    DemState {
-        grains: Grains::default(),
-        walls,
-        bodies,
-        params: DemParams {
-            materials: vec![law],
-            gravity,
-            domain: Domain {
-                min: [-1.0; 3],
-                max: [1.0; 3],
-                periodic: [false; 3],
-            },
-            skin: 1e-4,
-        },
-        time: 0.0,
-    }
-}
 
 /// A square of side `s` centred at `c` (counter-clockwise).
 fn square(c: DVec2, s: f64) -> Vec<DVec2> {
@@ -99,7 +70,7 @@ fn impact(e: f64, offset: f64) -> (Body, Body, DVec2) {
     let mut hit = hit;
     hit.v = DVec2::new(v, 0.0);
     let arm = DVec2::new(-0.5 * s - a, offset);
-    let mut st = state(law(e, 0.0), DVec2::ZERO, vec![hit, target], Vec::new());
+    let mut st = state(law(KN, e, 0.0), DVec2::ZERO, vec![hit, target], Vec::new());
     run(&mut st, 1e-6, 0.03);
     (st.bodies[0].clone(), st.bodies[1].clone(), arm)
 }
@@ -171,7 +142,7 @@ fn a_square_at_rest_on_a_floor_weighs_its_weight() {
             // A drum of 1 m: its bottom is flat to 12 µm across the square.
             _ => (vec![sq], vec![Wall::drum(DVec2::new(0.0, 1.0), 1.0, 0.5)]),
         };
-        let mut st = state(law(0.3, 0.5), g, bodies, walls);
+        let mut st = state(law(KN, 0.3, 0.5), g, bodies, walls);
         run(&mut st, 2e-6, 0.2);
         let b = &st.bodies[0];
         assert_close(
@@ -199,7 +170,7 @@ fn friction_holds_below_the_slip_limit_and_is_mu_n_at_it() {
         let g = DVec2::new(9.81 * theta.sin(), -9.81 * theta.cos());
         let sq = Body::new(0, &square(DVec2::new(0.0, 0.5 * s + a), s), a, DENSITY, 0, Motion::Free);
         let m = sq.mass;
-        let mut st = state(law(0.3, mu), g, vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, mu)]);
+        let mut st = state(law(KN, 0.3, mu), g, vec![sq], vec![Wall::plane(DVec2::ZERO, DVec2::Y, mu)]);
         run(&mut st, 2e-6, 0.1);
         let b = &st.bodies[0];
         let normal = m * 9.81 * theta.cos();
@@ -220,7 +191,7 @@ fn friction_holds_below_the_slip_limit_and_is_mu_n_at_it() {
 #[test]
 fn a_grain_rests_on_a_fixed_body() {
     let g = DVec2::new(0.0, -9.81);
-    let mut st = state(law(0.3, 0.5), g, vec![slab(0, 0.0005)], Vec::new());
+    let mut st = state(law(KN, 0.3, 0.5), g, vec![slab(0, 0.0005)], Vec::new());
     let r = 0.001;
     let m = Grains::<D2>::mass_of(r, DENSITY);
     st.grains.push(7, DVec2::new(0.003, 0.0005 + r + 2e-4), r, m, 0);
@@ -249,7 +220,7 @@ fn an_oblique_impact_with_friction_spins_the_body_by_the_friction_impulse() {
     let (r, e, mu) = (0.005, 1.0, 0.1);
     let mut disk = Body::new(0, &[DVec2::new(0.0, r + 1e-4)], r, DENSITY, 0, Motion::Free);
     disk.v = DVec2::new(1.0, -1.0);
-    let mut st = state(law(e, mu), DVec2::ZERO, vec![disk, slab(1, 1e-4)], Vec::new());
+    let mut st = state(law(KN, e, mu), DVec2::ZERO, vec![disk, slab(1, 1e-4)], Vec::new());
     run(&mut st, 1e-7, 0.002);
     let b = &st.bodies[0];
     let (m, inertia) = (b.mass, b.inertia);

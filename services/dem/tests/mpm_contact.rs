@@ -4,12 +4,15 @@
 //! the reaction on the body over the DEM's substeps. Checked against the paper's §5 numbers
 //! and statics.
 
+mod common;
+
+use common::{law, state};
 use glam::DVec2;
 use grains_dem::bodies::{Body, BodyContacts, GrainView, Motion, point_forces};
-use grains_dem::contact::{ContactParams, Damping};
+use grains_dem::contact::ContactParams;
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::D2;
-use grains_dem::state::{DemParams, DemState, Domain, Grains};
+use grains_dem::state::DemState;
 use grains_grid::{Grid, Kernel};
 use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
 use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline, Transfer};
@@ -55,18 +58,6 @@ impl Run {
     }
 }
 
-fn law(kn: f64, e: f64, mu: f64) -> ContactParams {
-    ContactParams {
-        stiffness_normal: kn,
-        stiffness_tangential: 0.5 * kn,
-        damping: Damping::Restitution(e),
-        friction: mu,
-        cohesion_normal: 0.0,
-        cohesion_tangential: 0.0,
-        damping_scale: 1.0,
-    }
-}
-
 /// Linear elasticity of bulk modulus K and shear modulus G (no yield).
 fn elastic(bulk: f64, shear: f64) -> Model {
     Model::Elastic(DruckerPragerYue {
@@ -79,22 +70,7 @@ fn elastic(bulk: f64, shear: f64) -> Model {
 
 fn run(law: ContactParams, gravity: DVec2, bodies: Vec<Body>, pts: Points<D2>, params: MpmParams<D2>, r_p: f64) -> Run {
     Run {
-        dem: DemState {
-            grains: Grains::default(),
-            walls: Vec::new(),
-            bodies,
-            params: DemParams {
-                materials: vec![law],
-                gravity,
-                domain: Domain {
-                    min: [-1.0; 3],
-                    max: [1.0; 3],
-                    periodic: [false; 3],
-                },
-                skin: 1e-4,
-            },
-            time: 0.0,
-        },
+        dem: state(law, gravity, bodies, Vec::new()),
         dem_pipe: DemPipeline::new(1).unwrap(),
         pts,
         mpm: MpmPipeline::new(1).unwrap(),
