@@ -93,7 +93,7 @@ impl Scene {
             return s.participants.clone();
         }
         let has = |m: Model| self.bodies.iter().any(|b| b.model == m);
-        let grains = has(Model::Dem) || has(Model::Hybrid);
+        let grains = self.has_grains();
         let dem = grains || !self.rigids.is_empty();
         let mpm = has(Model::Mpm) || has(Model::Hybrid);
         let mut out = Vec::new();
@@ -118,6 +118,11 @@ impl Scene {
     pub fn time_owner(&self) -> Role {
         let parts = self.participants();
         if parts.contains(&Role::Coupler) { Role::Coupler } else { parts[0] }
+    }
+
+    /// Whether the scene has grains (a `dem` or `hybrid` body).
+    pub fn has_grains(&self) -> bool {
+        self.bodies.iter().any(|b| b.model != Model::Mpm)
     }
 
     /// Whether rigid bodies meet a continuum by contact (Jiang 2020 §4): the DEM and the MPM

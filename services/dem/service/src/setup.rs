@@ -86,17 +86,22 @@ pub fn stable_step(scene: &Scene) -> Option<(f64, f64, f64, &DemMaterial, &str)>
     {
         let mat = &scene.materials[r.material];
         let Some(dem) = &mat.dem else { continue };
-        let vertices: Vec<DVec2> = r.vertices.iter().map(|&[x, y]| DVec2::new(x, y)).collect();
-        let props = grains_dem::bodies::mass_properties(&vertices, r.radius);
-        let reach = vertices.iter().map(|&v| (v - props.centroid).length()).fold(0.0, f64::max) + r.radius;
-        let (m, inertia) = (mat.density * props.area, mat.density * props.second_moment);
-        let m_min = 0.25 / (1.0 / m + reach * reach / inertia);
+        let m_min = 0.25 * effective_mass(r, mat.density);
         let critical = critical_time_step(&contact_params(dem), m_min);
         if best.is_none_or(|b| SAFE_FRACTION * critical < b.0) {
             best = Some((SAFE_FRACTION * critical, critical, m_min, dem, &mat.name));
         }
     }
     best
+}
+
+/// A rigid body's effective mass at its farthest point, 1 / (1/m + R²/I): what a contact
+/// there pushes (mass and inertia from its swept shape of density `rho`).
+fn effective_mass(r: &grains_protocol::scene::Rigid, rho: f64) -> f64 {
+    let vertices: Vec<DVec2> = r.vertices.iter().map(|&[x, y]| DVec2::new(x, y)).collect();
+    let props = grains_dem::bodies::mass_properties(&vertices, r.radius);
+    let reach = vertices.iter().map(|&v| (v - props.centroid).length()).fold(0.0, f64::max) + r.radius;
+    1.0 / (1.0 / (rho * props.area) + reach * reach / (rho * props.second_moment))
 }
 
 /// Refuses a DEM step above the safe fraction of the critical step of any DEM material the
@@ -144,13 +149,7 @@ pub fn contact_step(scene: &Scene) -> Option<(f64, f64, f64)> {
         .rigids
         .iter()
         .filter(|r| r.motion == grains_protocol::scene::RigidMotion::Free)
-        .map(|r| {
-            let vertices: Vec<DVec2> = r.vertices.iter().map(|&[x, y]| DVec2::new(x, y)).collect();
-            let props = grains_dem::bodies::mass_properties(&vertices, r.radius);
-            let reach = vertices.iter().map(|&v| (v - props.centroid).length()).fold(0.0, f64::max) + r.radius;
-            let rho = scene.materials[r.material].density;
-            1.0 / (1.0 / (rho * props.area) + reach * reach / (rho * props.second_moment))
-        });
+        .map(|r| effective_mass(r, scene.materials[r.material].density));
     let m = bodies.fold(scene.point_mass()?, f64::min);
     scene
         .rigids

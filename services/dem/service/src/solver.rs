@@ -71,8 +71,7 @@ impl<S: Space> DemSolver<S> {
             out_dir.map(|dir| StepLog::open(&dir.join(name), &header, resume)).transpose()
         };
         // The grains' loads: none without grains (the walls' loads of a continuum are the MPM's).
-        let grains = scene.bodies.iter().any(|b| b.model != Model::Mpm);
-        let walls_log = match state.walls.is_empty() || !grains {
+        let walls_log = match state.walls.is_empty() || !scene.has_grains() {
             true => None,
             false => log(
                 "walls.csv",

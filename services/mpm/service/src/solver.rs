@@ -82,11 +82,7 @@ impl<S: MpmSpace> MpmSolver<S> {
         let walls_log = match out_dir {
             Some(dir) if !params.walls.is_empty() => {
                 // Beside grains, whose loads are the DEM's walls.csv.
-                let name = if scene.bodies.iter().any(|b| b.model != grains_protocol::scene::Model::Mpm) {
-                    "walls_mpm.csv"
-                } else {
-                    "walls.csv"
-                };
+                let name = if scene.has_grains() { "walls_mpm.csv" } else { "walls.csv" };
                 let columns: String = params
                     .walls
                     .iter()
