@@ -2,9 +2,9 @@
 //! §5), through real runs (the DEM and the MPM as processes, the contacts crossing between
 //! them each step):
 //!
-//! - §5.1.1: an elastic MPM disk hits a resting rigid disk of the same mass; the share of the
-//!   kinetic energy of a perfectly elastic collision of rigid disks the rigid disk leaves with,
-//!   hard and ten times softer, against the paper's 99.2% and 92.2%;
+//! - §5.1.1: an elastic MPM disk hits a resting rigid disk of the same mass at 2 cm/s; the
+//!   share of the kinetic energy of a perfectly elastic collision of rigid disks the rigid disk
+//!   leaves with, hard and ten times softer, against the paper's 99.2% and 92.2%;
 //! - §5.2.1: an elastic block comes to rest on a fixed rigid slab; the slab's force against the
 //!   block's weight on four grids (statics, 1%: the force does not depend on the grid), beside
 //!   the same block on a grid-node wall (the MPM alone), and the cost of a step of each;
@@ -27,6 +27,9 @@ const PAPER_SOFT: f64 = 0.9216;
 /// The silo's discharge-rate window [s]: after the start-up, while the silo is still filled
 /// higher than 2.5 times its widest orifice.
 const SILO_WINDOW: (f64, f64) = (0.05, 0.25);
+/// The soft disk's share within this of the paper's (points of the share): the share moves by
+/// about a point with the contact radius within eq. 45's range and with the grid.
+const SOFT_TOLERANCE: f64 = 0.02;
 /// Statics: the slab carries the block's weight to this share.
 const REST_TOLERANCE: f64 = 0.01;
 
@@ -96,12 +99,20 @@ fn disk_impact(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow:
         "soft < hard ≤ 100%",
         shares[1] < shares[0] && shares[0] <= 1.0,
     );
+    part.check(
+        "MPM disk → rigid disk, soft: the rigid disk's share of the ideal kinetic energy",
+        "Jiang 2020 §5.1.1: 92.2%",
+        format!("{:.2}%", 100.0 * shares[1]),
+        format!("within {:.0} points", 100.0 * SOFT_TOLERANCE),
+        (shares[1] - PAPER_SOFT).abs() <= SOFT_TOLERANCE,
+    );
     let _ = writeln!(
         md,
-        "\nThe share depends on how stiff the point contacts are against the disk: measured in process \
-         (`services/dem/tests/mpm_contact.rs`), 86.1% at k_n = 6e8 N/m, 91.7% at 1e7, 98.7% at 1e6, 99.96% at 1e5, and the same \
-         within 0.6% at a tenth of the step (so not the time step). The paper's stiffness is given in N/cm and its densities in \
-         g/cm² of a 2D run, so its ratio could not be recovered.\n"
+        "\nThe paper's text says 2 m/s, but its Fig. 6 is in cm/s and its disks meet 1.46 s after the start, which is \
+         2 cm/s. The speed matters because the contact is a disk meeting a lattice of point disks, not one linear spring: \
+         at 2 m/s the rigid disk's share was 88.95% (hard) and 79.13% (soft) through this scene. On 2026-12-03, at 2 cm/s, \
+         r_p = 1.0 mm (under eq. 45's range, 1.5–3 mm here), 1.5 mm (the scene's) and 2.0 mm gave 97.84/92.33%, 97.79/92.31% and 97.69/92.10% \
+         (hard/soft); the hard disk stays 1.4 points under the paper's 99.2%.\n"
     );
     Ok(())
 }
@@ -260,3 +271,4 @@ fn silo(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result
     );
     Ok(())
 }
+

@@ -90,21 +90,22 @@ fn fill(region: Region, h: f64, rho: f64) -> Points<D2> {
     pts
 }
 
-/// Jiang 2020 §5.1.1: an elastic MPM disk at 2 m/s hits a resting rigid disk of the same
+/// Jiang 2020 §5.1.1: an elastic MPM disk at 2 cm/s hits a resting rigid disk of the same
 /// size and density head-on (no gravity, elastic contacts, FLIP). The paper's rigid disk leaves
 /// with 99.2% of the kinetic energy of a perfectly elastic collision of rigid disks for its
 /// hard disk (K = 5 MPa, G = 3.7 MPa at ρ = 2000) and 92.2% for the soft one (ten times
-/// softer). Here the point contacts are as stiff as the hard disk's material (k_n = 1e7 N/m,
-/// about its Young's modulus over the unit thickness; the deepest contact 0.13 mm, under
-/// r_p): momentum is kept to round-off, no energy is made, and the hard disk gives more than
-/// the soft one (80.4%); but the rigid disk takes 91.7% of the ideal energy, not 99%: the
-/// MPM disk keeps 4% of its speed and rings. The share depends on how the contact's stiffness
-/// compares with the disk's (measured: 86.1% at k_n = 6e8 N/m, 91.7% at 1e7, 98.7% at 1e6,
-/// 99.96% at 1e5, where points sink 2 mm into the disk). The bound below guards this
-/// number; it is not the paper's.
+/// softer). Its text says 2 m/s, but its Fig. 6 is in cm/s and the disks meet 1.46 s after
+/// the start: 2 cm/s. The speed matters, because the contact is a disk meeting a lattice of
+/// point disks, not one linear spring: at 2 m/s it engages rows of points at once (91.7% here
+/// when this test ran at 2 m/s). The point contacts are as stiff as the hard disk's material
+/// (k_n = 1e7 N/m, about its Young's modulus over the unit thickness), r_p the points' spacing
+/// (the lower end of eq. 45), the grid aligned with the points' lattice as in a scene.
+/// Momentum is kept to round-off, no energy is made, the soft disk gives less; the rigid
+/// disk takes 95.5% (hard) and 90.8% (soft) of the ideal energy, not the paper's 99.2%. The
+/// bound below guards that number; it is not the paper's.
 #[test]
 fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
-    let (radius, h, rho, v0, kn) = (0.02, 0.003, 2000.0, 2.0, 1e7);
+    let (radius, h, rho, v0, kn) = (0.02, 0.003, 2000.0, 0.02, 1e7);
     let mut kept = Vec::new();
     for softness in [1.0, 10.0] {
         let pts = {
@@ -123,7 +124,7 @@ fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
         let target = Body::new(0, &[DVec2::new(radius, 0.0)], radius, rho, 0, Motion::Free);
         let m_b = target.mass;
         let params = MpmParams {
-            grid: Grid::covering([-0.1, -0.05, 0.0], [0.12, 0.05, 0.0], h, 2),
+            grid: Grid::covering([-0.06, -0.04, 0.0], [0.12, 0.04, 0.0], h, 2),
             kernel: Kernel::Gimp { half_width: 0.25 * h },
             model: elastic(5e6 / softness, 3.7e6 / softness),
             gravity: DVec2::ZERO,
@@ -131,12 +132,13 @@ fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
             domain_walls: None,
             walls: Vec::new(),
         };
-        // r_p: half the points' spacing, where GIMP puts the continuum's surface.
-        let r_p = 0.25 * h;
+        // r_p: the points' spacing, the lower end of eq. 45 (as the scenes take it).
+        let r_p = 0.5 * h;
         let mut r = run(law(kn, 1.0, 0.1), DVec2::ZERO, vec![target], pts, params, r_p);
         let dt = 1e-5;
         let mut sink: f64 = 0.0;
-        for _ in 0..800 {
+        // The nearest points 1.75 mm from contact: 88 ms to meet, then a few ms of contact.
+        for _ in 0..12000 {
             let f = r.step(dt, 1);
             sink = f.iter().map(|(_, f)| f.length() / kn).fold(sink, f64::max);
         }
@@ -163,8 +165,8 @@ fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
         kept.push(share);
     }
     assert!(
-        kept[0] >= 0.9,
-        "hard disk: the rigid disk takes {:.2}% (91.7% when written; paper 99.2%)",
+        kept[0] >= 0.95,
+        "hard disk: the rigid disk takes {:.2}% (95.5% when written; paper 99.2%)",
         100.0 * kept[0]
     );
     assert!(kept[1] < kept[0], "the soft disk gives less: {kept:?}");
