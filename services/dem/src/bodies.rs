@@ -27,6 +27,7 @@
 //! still recorded: the load on a floor or a tool).
 
 use crate::contact::{ContactParams, ContactState, contact_force};
+pub use grains_grid::polygon::{Near, near};
 use crate::space::D2;
 use crate::state::{Wall, WallShape};
 use glam::DVec2;
@@ -261,71 +262,6 @@ impl Body {
     }
 }
 
-/// Where a point is against a polygon ([`near`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Near {
-    /// The nearest point of the polygon's outline...
-    pub y: DVec2,
-    /// ... the vertex it is, if it is one;
-    pub vertex: Option<usize>,
-    /// the signed distance to it (negative inside a polygon of three vertices or more)...
-    pub gap: f64,
-    /// ... along this unit normal, which points from the polygon to the point (outward).
-    pub normal: DVec2,
-}
-
-/// Where `p` is against the polygon `poly` (world vertices; one vertex: a point, two: a
-/// segment). A point inside a polygon is at a negative distance from its outline, with the
-/// normal pointing out through the nearest edge, so that a contact pushes it out, never on
-/// through.
-pub fn near(poly: &[DVec2], p: DVec2) -> Near {
-    let n = poly.len();
-    let edges = match n {
-        1 => 0,
-        2 => 1,
-        _ => n,
-    };
-    let (mut y, mut vertex, mut best, mut edge) = (poly[0], Some(0), (p - poly[0]).length_squared(), None);
-    for k in 0..edges {
-        let (a, b) = (poly[k], poly[(k + 1) % n]);
-        let e = b - a;
-        let t = ((p - a).dot(e) / e.length_squared()).clamp(0.0, 1.0);
-        let at = a + e * t;
-        let d2 = (p - at).length_squared();
-        if d2 < best {
-            (y, best, edge) = (at, d2, Some(k));
-            vertex = if t == 0.0 {
-                Some(k)
-            } else if t == 1.0 {
-                Some((k + 1) % n)
-            } else {
-                None
-            };
-        }
-    }
-    let inside = n >= 3 && (0..n).all(|k| cross(poly[(k + 1) % n] - poly[k], p - poly[k]) >= 0.0);
-    let d = best.sqrt();
-    let normal = if d > 0.0 {
-        (p - y) / d
-    } else if let Some(k) = edge {
-        // On the outline: the edge's outward normal (counter-clockwise polygons).
-        let e = poly[(k + 1) % n] - poly[k];
-        DVec2::new(e.y, -e.x).normalize()
-    } else {
-        DVec2::ZERO
-    };
-    if inside {
-        Near {
-            y,
-            vertex,
-            gap: -d,
-            normal: if d > 0.0 { -normal } else { normal },
-        }
-    } else {
-        Near { y, vertex, gap: d, normal }
-    }
-}
-
 /// One side of a contact: its centre, velocity, spin and inverse inertias (0 for a side that
 /// does not yield: a wall, a fixed or scripted body, a frozen grain).
 #[derive(Clone, Copy, Debug)]
@@ -430,6 +366,7 @@ pub fn forces(
     let mut on_grains = Vec::new();
     let polys: Vec<Vec<DVec2>> = bodies.iter().map(Body::vertices).collect();
     let sides: Vec<Side> = bodies.iter().map(Body::side).collect();
+    let candidates = near_disks(bodies, grains);
     let mut load = vec![(DVec2::ZERO, 0.0); bodies.len()];
     let apply = |load: &mut Vec<(DVec2, f64)>, b: usize, f: DVec2, p: DVec2| {
         load[b].0 += f;
@@ -473,7 +410,7 @@ pub fn forces(
         }
         let grain_key = |grain, body| Key::Grain { grain, body };
         on_grains.extend(disk_contacts(
-            i, &bodies[i], &polys[i], &sides[i], &law, grains, grain_key, dt, &history, &mut list, &mut load,
+            i, &bodies[i], &polys[i], &sides[i], &law, grains, &candidates[i], grain_key, dt, &history, &mut list, &mut load,
         ));
         for (w, wall) in walls.iter().enumerate() {
             let mut law = law;
@@ -550,10 +487,18 @@ pub fn forces(
     on_grains
 }
 
-/// The contacts of body `i` (world polygon `poly`, side `side`, law `law`) with `disks`
-/// (grains, or material points as disks of their contact radius), keyed by `key(disk id, body
-/// id)`: each one's history from `history`, pushed to `list`; the reaction added to
-/// `load[i]`; returns (disk index, force on the disk, its torque about the disk's centre).
+/// For each body, the disks within its reach ([`Body::reach`]), by the broad phase.
+fn near_disks(bodies: &[Body], disks: &[GrainView]) -> Vec<Vec<usize>> {
+    let centres: Vec<(DVec2, f64)> = disks.iter().map(|d| (d.x, d.radius)).collect();
+    let circles: Vec<(DVec2, f64)> = bodies.iter().map(|b| (b.x, b.reach())).collect();
+    grains_grid::reach::within_reach(&centres, &circles)
+}
+
+/// The contacts of body `i` (world polygon `poly`, side `side`, law `law`) with the disks
+/// `candidates` of `disks` (grains, or material points as disks of their contact radius), keyed by
+/// `key(disk id, body id)`: each one's history from `history`, pushed to `list`; the reaction
+/// added to `load[i]`; returns (disk index, force on the disk, its torque about the disk's
+/// centre).
 #[allow(clippy::too_many_arguments)]
 fn disk_contacts(
     i: usize,
@@ -562,6 +507,7 @@ fn disk_contacts(
     side: &Side,
     law: &ContactParams,
     disks: &[GrainView],
+    candidates: &[usize],
     key: impl Fn(u64, u64) -> Key,
     dt: f64,
     history: &impl Fn(&Key) -> ContactState<DVec2>,
@@ -569,13 +515,7 @@ fn disk_contacts(
     load: &mut [(DVec2, f64)],
 ) -> Vec<(usize, DVec2, f64)> {
     let mut out = Vec::new();
-    // Once per body, not per disk: it scans the shape.
-    let body_reach = body.reach();
-    for disk in disks {
-        let reach = body_reach + disk.radius;
-        if (disk.x - body.x).length_squared() > reach * reach {
-            continue;
-        }
+    for disk in candidates.iter().map(|&k| &disks[k]) {
         let at = near(poly, disk.x);
         let k = key(disk.id, body.id);
         let mut state = history(&k);
@@ -625,11 +565,12 @@ pub fn point_forces(
     let mut list = Vec::new();
     let mut load = vec![(DVec2::ZERO, 0.0); bodies.len()];
     let mut out = Vec::new();
+    let candidates = near_disks(bodies, points);
     for (i, body) in bodies.iter().enumerate() {
         let (poly, side) = (body.vertices(), body.side());
         let law = materials[body.material as usize];
         let key = |point, body| Key::Point { point, body };
-        let touched = disk_contacts(i, body, &poly, &side, &law, points, key, dt, &history, &mut list, &mut load);
+        let touched = disk_contacts(i, body, &poly, &side, &law, points, &candidates[i], key, dt, &history, &mut list, &mut load);
         out.extend(touched.into_iter().map(|(p, f, _)| (p, f)));
     }
     for (b, (f, t)) in bodies.iter_mut().zip(load) {
@@ -732,27 +673,6 @@ mod tests {
                 shape.len()
             );
         }
-    }
-
-    /// The nearest point and vertex, and the signed distance with its outward normal: outside
-    /// off an edge and off a corner, inside (negative, out through the nearest edge), and of a
-    /// point and a segment.
-    #[test]
-    fn near_finds_the_nearest_point_and_the_side() {
-        let sq = [DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y];
-        let at = near(&sq, DVec2::new(0.5, -0.2));
-        assert_eq!((at.y, at.vertex, at.normal), (DVec2::new(0.5, 0.0), None, -DVec2::Y));
-        assert!((at.gap - 0.2).abs() < 1e-15);
-        let at = near(&sq, DVec2::new(1.5, 1.5));
-        assert_eq!((at.y, at.vertex), (DVec2::ONE, Some(2)));
-        assert!((at.gap - 0.5f64.sqrt()).abs() < 1e-15 && (at.normal - DVec2::ONE.normalize()).length() < 1e-15);
-        let at = near(&sq, DVec2::new(0.5, 0.1));
-        assert_eq!((at.y, at.vertex, at.normal), (DVec2::new(0.5, 0.0), None, -DVec2::Y));
-        assert!((at.gap + 0.1).abs() < 1e-15, "inside: {}", at.gap);
-        let at = near(&sq[..1], DVec2::new(3.0, 4.0));
-        assert_eq!((at.y, at.vertex, at.gap), (DVec2::ZERO, Some(0), 5.0));
-        let at = near(&sq[..2], DVec2::new(0.25, -1.0));
-        assert_eq!((at.y, at.vertex, at.gap, at.normal), (DVec2::new(0.25, 0.0), None, 1.0, -DVec2::Y));
     }
 
     fn floor_law() -> ContactParams {

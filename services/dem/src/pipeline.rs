@@ -376,11 +376,14 @@ impl<S: Space> DemPipeline<S> {
         }
         assert_eq!(S::DIM, 2, "rigid bodies are 2D");
         let g = &state.grains;
-        // Only the grains within some body's reach: the few bodies' scratch stays small.
+        // Only the grains within some body's reach: the bodies' scratch stays small.
         let reach: Vec<(glam::DVec2, f64)> = state.bodies.iter().map(|b| (b.x, b.reach())).collect();
-        let near = |x: glam::DVec2, r: f64| reach.iter().any(|&(c, a)| (x - c).length_squared() <= (a + r) * (a + r));
-        let view: Vec<GrainView> = (0..g.len())
-            .filter(|&i| near(to_plane::<S>(g.x[i]), g.radius[i]))
+        let disks: Vec<(glam::DVec2, f64)> = (0..g.len()).map(|i| (to_plane::<S>(g.x[i]), g.radius[i])).collect();
+        let mut near: Vec<usize> = grains_grid::reach::within_reach(&disks, &reach).concat();
+        near.sort_unstable();
+        near.dedup();
+        let view: Vec<GrainView> = near
+            .into_iter()
             .map(|i| GrainView {
                 index: i,
                 x: to_plane::<S>(g.x[i]),

@@ -9,11 +9,16 @@
 //!   grains, the oracle), and the inertial number of a rate (the oracle, the MPM's μ(I));
 //! - [`homogenize`]: the grains' stress on the grid from their contacts (Yue 2018 Alg. 11),
 //!   computed by the DEM for the oracle's new material points;
+//! - [`polygon`]: where a point is against a convex polygon (nearest point, signed distance);
+//! - [`reach`]: which disks lie within reach of which circles (the rigid bodies' broad phase,
+//!   for the DEM's grains and the MPM's contact points alike);
 //! - [`rng`]: seeded SplitMix64 randomness and the polydisperse radius draw, for the DEM's
 //!   packings, the oracle's new grains and the synthetic rasters.
 
 pub mod gradient;
 pub mod homogenize;
+pub mod polygon;
+pub mod reach;
 pub mod rng;
 pub mod shape;
 pub mod space;

@@ -321,26 +321,24 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
     fn contact_points(&mut self, reach: &[BodyReach], out: &mut Vec<ContactPoint>) {
         let p = &self.points;
         let r_p = self.contact_radius;
-        let near = |x: [f64; 3]| {
-            reach.iter().any(|b| {
-                let d2: f64 = (0..3).map(|k| (x[k] - b.center[k]).powi(2)).sum();
-                d2 <= (b.reach + r_p).powi(2)
-            })
-        };
+        // The contact coupling is 2D (scenes refuse rigid bodies in 3D): the plane's x and y.
+        let plane = |x: [f64; 3]| glam::DVec2::new(x[0], x[1]);
+        let disks: Vec<(glam::DVec2, f64)> = p.x.iter().map(|&x| (plane(S::to_array(x)), r_p)).collect();
+        let circles: Vec<(glam::DVec2, f64)> = reach.iter().map(|b| (plane(b.center), b.reach)).collect();
+        let mut near = grains_grid::reach::within_reach(&disks, &circles).concat();
+        near.sort_unstable();
+        near.dedup();
         self.sent.clear();
-        for k in 0..p.len() {
-            let x = S::to_array(p.x[k]);
-            if near(x) {
-                self.sent.push(k as u64);
-                out.push(ContactPoint {
-                    index: k as u64,
-                    id: p.id[k],
-                    position: x,
-                    velocity: S::to_array(p.v[k]),
-                    mass: p.mass[k],
-                    radius: r_p,
-                });
-            }
+        for k in near {
+            self.sent.push(k as u64);
+            out.push(ContactPoint {
+                index: k as u64,
+                id: p.id[k],
+                position: S::to_array(p.x[k]),
+                velocity: S::to_array(p.v[k]),
+                mass: p.mass[k],
+                radius: r_p,
+            });
         }
     }
 
