@@ -27,10 +27,10 @@
 //! still recorded: the load on a floor or a tool).
 
 use crate::contact::{ContactParams, ContactState, contact_force};
-pub use grains_grid::polygon::{Near, near};
 use crate::space::D2;
 use crate::state::{Wall, WallShape};
 use glam::DVec2;
+pub use grains_grid::polygon::{Near, near};
 
 /// How a body moves.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -410,7 +410,18 @@ pub fn forces(
         }
         let grain_key = |grain, body| Key::Grain { grain, body };
         on_grains.extend(disk_contacts(
-            i, &bodies[i], &polys[i], &sides[i], &law, grains, &candidates[i], grain_key, dt, &history, &mut list, &mut load,
+            i,
+            &bodies[i],
+            &polys[i],
+            &sides[i],
+            &law,
+            grains,
+            &candidates[i],
+            grain_key,
+            dt,
+            &history,
+            &mut list,
+            &mut load,
         ));
         for (w, wall) in walls.iter().enumerate() {
             let mut law = law;
@@ -489,9 +500,8 @@ pub fn forces(
 
 /// For each body, the disks within its reach ([`Body::reach`]), by the broad phase.
 fn near_disks(bodies: &[Body], disks: &[GrainView]) -> Vec<Vec<usize>> {
-    let centres: Vec<(DVec2, f64)> = disks.iter().map(|d| (d.x, d.radius)).collect();
     let circles: Vec<(DVec2, f64)> = bodies.iter().map(|b| (b.x, b.reach())).collect();
-    grains_grid::reach::within_reach(&centres, &circles)
+    grains_grid::reach::within_reach(disks.len(), |k| (disks[k].x, disks[k].radius), &circles)
 }
 
 /// The contacts of body `i` (world polygon `poly`, side `side`, law `law`) with the disks
@@ -570,7 +580,20 @@ pub fn point_forces(
         let (poly, side) = (body.vertices(), body.side());
         let law = materials[body.material as usize];
         let key = |point, body| Key::Point { point, body };
-        let touched = disk_contacts(i, body, &poly, &side, &law, points, &candidates[i], key, dt, &history, &mut list, &mut load);
+        let touched = disk_contacts(
+            i,
+            body,
+            &poly,
+            &side,
+            &law,
+            points,
+            &candidates[i],
+            key,
+            dt,
+            &history,
+            &mut list,
+            &mut load,
+        );
         out.extend(touched.into_iter().map(|(p, f, _)| (p, f)));
     }
     for (b, (f, t)) in bodies.iter_mut().zip(load) {

@@ -378,8 +378,7 @@ impl<S: Space> DemPipeline<S> {
         let g = &state.grains;
         // Only the grains within some body's reach: the bodies' scratch stays small.
         let reach: Vec<(glam::DVec2, f64)> = state.bodies.iter().map(|b| (b.x, b.reach())).collect();
-        let disks: Vec<(glam::DVec2, f64)> = (0..g.len()).map(|i| (to_plane::<S>(g.x[i]), g.radius[i])).collect();
-        let mut near: Vec<usize> = grains_grid::reach::within_reach(&disks, &reach).concat();
+        let mut near: Vec<usize> = grains_grid::reach::within_reach(g.len(), |i| (to_plane::<S>(g.x[i]), g.radius[i]), &reach).concat();
         near.sort_unstable();
         near.dedup();
         let view: Vec<GrainView> = near

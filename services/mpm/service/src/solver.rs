@@ -323,9 +323,8 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
         let r_p = self.contact_radius;
         // The contact coupling is 2D (scenes refuse rigid bodies in 3D): the plane's x and y.
         let plane = |x: [f64; 3]| glam::DVec2::new(x[0], x[1]);
-        let disks: Vec<(glam::DVec2, f64)> = p.x.iter().map(|&x| (plane(S::to_array(x)), r_p)).collect();
         let circles: Vec<(glam::DVec2, f64)> = reach.iter().map(|b| (plane(b.center), b.reach)).collect();
-        let mut near = grains_grid::reach::within_reach(&disks, &circles).concat();
+        let mut near = grains_grid::reach::within_reach(p.len(), |k| (plane(S::to_array(p.x[k])), r_p), &circles).concat();
         near.sort_unstable();
         near.dedup();
         self.sent.clear();
