@@ -50,4 +50,15 @@ pub mod sdem {
     pub const SILO: &str = "sdem_silo_2d.toml";
     pub const SLAB_RADIUS: f64 = 0.0005;
     pub const ORIFICES: [f64; 5] = [0.004, 0.006, 0.008, 0.010, 0.012];
+    /// §5.4: an MPM bar hits a rigid bar (`rigid.0`, a rectangle of [`ROD_LENGTH`] by
+    /// [`ROD_LENGTH`] swept by [`SLAB_RADIUS`]), on these grids [m].
+    pub const ROD: &str = "sdem_rod_2d.toml";
+    pub const ROD_LENGTH: f64 = 0.01;
+    pub const ROD_GRIDS: [f64; 6] = [0.001, 0.002, 0.0025, 0.004, 0.005, 0.01];
+    /// §7: rigid pentagons with MPM fines (`body.0`, a box from the floor) compressed by a
+    /// scripted bar (the last rigid body) starting [`MATRIX_GAP`] above them [m]; the fines'
+    /// heights [m].
+    pub const MATRIX: &str = "sdem_matrix_2d.toml";
+    pub const MATRIX_GAP: f64 = 0.001;
+    pub const FILLS: [f64; 3] = [0.015, 0.03, 0.045];
 }

@@ -37,6 +37,18 @@ pub struct Coupling {
     /// Contact radius r_p of a material point against a rigid body [m] (Jiang 2020 eq. 44–45);
     /// `None`: the middle of eq. 45's interval ([`super::Scene::contact_radius`]).
     pub contact_radius: Option<f64>,
+    /// Where a rigid body's contact force on a material point acts on the grid.
+    pub contact_forces: ContactForces,
+}
+
+/// Where the MPM puts a contact force on a point (Jiang 2020 §5.4 compares the two).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ContactForces {
+    /// The default, eq. 46–48: on the point, spread to its nodes with its weights (MPM-SDEM).
+    Points,
+    /// All on the grid node nearest the point (the paper's MPM-GRID scheme, kept to compare
+    /// with: the force no longer follows the point within its cell).
+    Nodes,
 }
 
 /// What `coupling.substeps = "auto"` asks for: the DEM step `dem_dt` (the DEM's own stable
@@ -86,6 +98,7 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
             grain_transfer: GrainTransfer::Flip,
             quasi_static: 1e-3,
             contact_radius: None,
+            contact_forces: ContactForces::Points,
         });
     };
     let (substeps, auto) = match &c.substeps {
@@ -157,6 +170,17 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
             None => None,
             Some(r) => Some(in_range(ctx, r, "coupling.contact_radius", Open(0.0), Bound::None)?),
         },
+        contact_forces: match c.contact_forces.as_ref().map(|t| (t, t.get_ref().as_str())) {
+            None | Some((_, "points")) => ContactForces::Points,
+            Some((_, "nodes")) => ContactForces::Nodes,
+            Some((t, other)) => {
+                return Err(ctx.err(
+                    Some(t.span()),
+                    Some("coupling.contact_forces"),
+                    format!("must be \"points\" or \"nodes\", got {other:?}"),
+                ));
+            }
+        },
     })
 }
 
@@ -207,5 +231,21 @@ mod tests {
         );
         let text = format!("{DEM}\n[coupling]\nsubsteps = \"auto\"\n");
         check_err(&text, Some(line_of(&text, "substeps")), "coupling.substeps", "has no hybrid body");
+    }
+
+    #[test]
+    fn contact_forces_act_on_points_unless_the_scene_says_nodes() {
+        use super::ContactForces;
+        let s = from_str(&hybrid("weight = 0.5"), Path::new("h.toml"), 1).unwrap();
+        assert_eq!(s.coupling.contact_forces, ContactForces::Points);
+        let s = from_str(&hybrid("contact_forces = \"nodes\""), Path::new("h.toml"), 1).unwrap();
+        assert_eq!(s.coupling.contact_forces, ContactForces::Nodes);
+        let text = hybrid("contact_forces = \"grid\"");
+        check_err(
+            &text,
+            Some(line_of(&text, "contact_forces")),
+            "coupling.contact_forces",
+            "must be \"points\" or \"nodes\", got \"grid\"",
+        );
     }
 }

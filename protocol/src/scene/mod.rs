@@ -32,7 +32,7 @@ mod walls;
 
 pub use bodies::{Body, Model, Shape};
 pub use bridge::SceneBridge;
-pub use coupling::{AutoSteps, Coupling, GrainTransfer};
+pub use coupling::{AutoSteps, ContactForces, Coupling, GrainTransfer};
 pub use domain::Domain;
 pub use errors::SceneError;
 pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel, RateFriction};

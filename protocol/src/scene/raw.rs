@@ -154,6 +154,7 @@ pub struct RawCoupling {
     pub grain_transfer: Option<Spanned<String>>,
     pub quasi_static: Option<Spanned<f64>>,
     pub contact_radius: Option<Spanned<f64>>,
+    pub contact_forces: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]

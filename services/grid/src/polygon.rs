@@ -73,7 +73,6 @@ pub fn near(poly: &[DVec2], p: DVec2) -> Near {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -99,6 +99,9 @@ pub struct MpmParams<S: Space> {
     /// leaves them free (then points must be kept away from the domain faces otherwise).
     pub domain_walls: Option<Contact>,
     pub walls: Vec<Wall<S>>,
+    /// Point loads act on the node nearest the point instead of through its weights (Jiang
+    /// 2020 §5.4's MPM-GRID scheme, to compare with).
+    pub loads_at_nodes: bool,
 }
 
 /// Node layers along each domain face that form its wall: with three layers no point can come
@@ -404,7 +407,20 @@ impl<S: MpmSpace> MpmPipeline<S> {
         for &(p, f) in &pts.loads {
             let st = stencil::<S>(grid, &weights, pts.x[p]);
             let nodes = &mut self.nodes;
-            for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
+            if params.loads_at_nodes {
+                // The node of the largest weight (the first of equals): the nearest one.
+                let mut best = (usize::MAX, 0.0);
+                for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| {
+                    if wip > best.1 {
+                        best = (i, wip);
+                    }
+                });
+                if best.0 != usize::MAX {
+                    nodes[best.0].force += f;
+                }
+            } else {
+                for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
+            }
         }
         Ok(())
     }

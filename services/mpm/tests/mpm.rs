@@ -36,6 +36,7 @@ fn params(grid: Grid, h: f64, ppc: usize, material: DruckerPragerYue) -> MpmPara
         transfer: Transfer::Flip(1.0),
         domain_walls: None,
         walls: Vec::new(),
+        loads_at_nodes: false,
     }
 }
 
@@ -282,6 +283,7 @@ fn elastic_bar_vibrates_at_c_over_2l_in_3d() {
         transfer: Transfer::Flip(1.0),
         domain_walls: None,
         walls: Vec::new(),
+        loads_at_nodes: false,
     };
     // ν = 0 in 3D: κ = E/3, μ = E/2; the uniaxial stress modulus of a free rod is E.
     let c = (young / density).sqrt();
@@ -313,6 +315,7 @@ fn sand_params_2d(grid: Grid, h: f64, model: Model) -> MpmParams<D2> {
             shift: DVec2::ZERO,
             id: 0,
         }],
+        loads_at_nodes: false,
     }
 }
 
@@ -413,6 +416,7 @@ fn a_continuum_layer_on_an_incline_slides_as_a_coulomb_block() {
             shift: DVec2::ZERO,
             id: 0,
         }],
+        loads_at_nodes: false,
     };
     let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
     let mut pipe = pipeline::<D2>();
@@ -617,4 +621,51 @@ fn broken_states_stop_naming_the_phase() {
     pts.x[0] = DVec2::new(0.02, 0.6);
     let err = pipeline::<D2>().step(&mut pts, &p, 1e-4).unwrap_err();
     assert!(matches!(err, StepError::LeftDomain { .. }), "{err}");
+}
+
+/// A point load for one step (the contact coupling's): spread with the point's weights it
+/// reaches every point sharing one of its nodes; put on the nearest node instead (Jiang 2020
+/// §5.4's MPM-GRID) only the points within that node's support move. Both add F dt to the
+/// momentum exactly (FLIP, no walls, no gravity).
+#[test]
+fn a_point_load_acts_through_the_weights_or_on_the_nearest_node() {
+    let h = 0.05;
+    let lp = 0.25 * h;
+    let f = DVec2::new(3.0, -1.0);
+    let dt = 1e-4;
+    let mut moved = Vec::new();
+    for at_nodes in [false, true] {
+        let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], h, 2);
+        let mut pts = block([0.3, 0.3], [0.7, 0.7], h, 2, 1000.0);
+        // A point near the middle: x = 0.5125, y = 0.4875 (a quarter cell off the node (0.5, 0.5)).
+        let p = (0..pts.len())
+            .min_by(|&a, &b| {
+                (pts.x[a] - DVec2::splat(0.5))
+                    .length()
+                    .total_cmp(&(pts.x[b] - DVec2::splat(0.5)).length())
+            })
+            .unwrap();
+        let node = (pts.x[p] / h).round() * h;
+        pts.loads.push((p, f));
+        let mut params = params(grid, h, 2, DruckerPragerYue::new(1e5, 0.3, 30.0, 2));
+        params.loads_at_nodes = at_nodes;
+        let p0: DVec2 = pts.v.iter().zip(&pts.mass).map(|(v, m)| *v * *m).sum();
+        pipeline::<D2>().step(&mut pts, &params, dt).unwrap();
+        let p1: DVec2 = pts.v.iter().zip(&pts.mass).map(|(v, m)| *v * *m).sum();
+        assert!((p1 - p0 - f * dt).length() < 1e-12 * (f * dt).length(), "momentum: {:?}", p1 - p0);
+        // Points outside the nearest node's support (|x − x_j| ≥ h + l_p along an axis).
+        let outside: Vec<bool> = (0..pts.len())
+            .map(|k| {
+                let d = (pts.x[k] - node).abs();
+                d.x >= h + lp || d.y >= h + lp
+            })
+            .collect();
+        let moved_outside = (0..pts.len()).filter(|&k| outside[k] && pts.v[k] != DVec2::ZERO).count();
+        moved.push(moved_outside);
+    }
+    assert!(
+        moved[0] > 0,
+        "spread with its weights, the load reaches beyond the nearest node's support"
+    );
+    assert_eq!(moved[1], 0, "on the nearest node, the load moves only the points of its support");
 }

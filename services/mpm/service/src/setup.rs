@@ -1,6 +1,7 @@
 //! Scene → material points and step parameters: the only place where the scene file meets the
 //! MPM library.
 
+use grains_grid::polygon::near;
 use grains_grid::{Grid, Space};
 use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
@@ -8,7 +9,7 @@ use grains_mpm::constitutive::plasticity_drucker_prager::{DruckerPragerYue, Iner
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
-use grains_protocol::scene::{Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
+use grains_protocol::scene::{ContactForces, Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
 use grains_protocol::wire::Zone;
 use grains_service::zones::ZoneField;
 
@@ -168,6 +169,7 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             MpmDomainWalls::Sticky => Contact::Sticky,
         }),
         walls,
+        loads_at_nodes: scene.coupling.contact_forces == ContactForces::Nodes,
     };
     Ok((pts, params))
 }
@@ -220,9 +222,10 @@ fn walls<S: MpmSpace>(scene: &Scene) -> Vec<Wall<S>> {
 }
 
 /// The points of every mpm and hybrid body (of `material`, index and material): seeded
-/// `points_per_axis` per cell and axis of `grid` at the bulk density, none behind a wall, a
-/// hybrid body's only in its hybrid (weight w) and continuum cells; moving at the body's
-/// velocity, and a box body under its confining pressure.
+/// `points_per_axis` per cell and axis of `grid` at the bulk density, none behind a wall or
+/// where a rigid body is (within its swept outline and the points' contact radius: they would
+/// start deep in contact), a hybrid body's only in its hybrid (weight w) and continuum cells;
+/// moving at the body's velocity, and a box body under its confining pressure.
 fn seed_points<S: MpmSpace>(
     scene: &Scene,
     zones: &ZoneField,
@@ -238,6 +241,16 @@ fn seed_points<S: MpmSpace>(
     let rho = bulk_density(material);
     let packing = material.mpm.as_ref().map_or(1.0, |m| m.packing);
     let mut pts = Points::<S>::default();
+    let r_p = scene.contact_radius();
+    let rigids: Vec<(Vec<glam::DVec2>, f64)> = scene
+        .rigids
+        .iter()
+        .map(|r| (r.vertices.iter().map(|&[x, y]| glam::DVec2::new(x, y)).collect(), r.radius + r_p))
+        .collect();
+    let covered = |x: S::V| {
+        let [x, y, _] = S::to_array(x);
+        rigids.iter().any(|(poly, reach)| near(poly, glam::DVec2::new(x, y)).gap < *reach)
+    };
     for body in scene.bodies.iter().filter(|b| b.model != BodyModel::Dem) {
         debug_assert_eq!(body.material, material_index);
         let region = match body.shape {
@@ -248,7 +261,7 @@ fn seed_points<S: MpmSpace>(
         // Points behind a wall (a box body cut by a drum's circle) are not seeded.
         for x in seed::<S>(region, grid.origin, h, per_axis)
             .into_iter()
-            .filter(|&x| !walls.iter().any(|w| w.behind(x, 0.0)))
+            .filter(|&x| !walls.iter().any(|w| w.behind(x, 0.0)) && !covered(x))
         {
             // Hybrid bodies: points in the hybrid band (weight w) and below it only.
             let weight = match body.model {
