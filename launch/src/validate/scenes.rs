@@ -41,6 +41,12 @@ pub mod sdem {
     pub const DISK: &str = "sdem_disk_impact_2d.toml";
     /// The soft disk's moduli are the hard one's over this.
     pub const SOFTER: f64 = 10.0;
+    /// §5.1.2: the same MPM disk dropped on a fixed slab (`rigid.0`).
+    pub const DROP: &str = "sdem_disk_drop_2d.toml";
+    /// §5.2.2: the block launched along a fixed slab (`rigid.0`), and when its landing's
+    /// bounces are over [s].
+    pub const SLIDE: &str = "sdem_block_slide_2d.toml";
+    pub const SLIDE_WINDOW: f64 = 0.08;
     /// §5.2.1: an MPM block at rest on a fixed slab (`rigid.0`), and its grids [m].
     pub const BLOCK: &str = "sdem_block_rest_2d.toml";
     pub const GRIDS: [f64; 4] = [0.002, 0.0025, 0.003, 0.004];
