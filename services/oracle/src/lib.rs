@@ -9,12 +9,16 @@
 //! - [`enrichment`]: where new grains go (Poisson-disk growth from the grains there) and their
 //!   velocity (Alg. 10);
 //! - [`epoch`]: one epoch of the oracle: new zones, and the grains and points to delete and
-//!   create (Alg. 8, 17, 18).
+//!   create (Alg. 8, 17, 18);
+//! - [`shear_band`]: where a continuum shear band has formed (Chen 2021 §3, Alg. 1);
+//! - [`band`]: the thickness of a band of grains or points (Chen 2021 App. A).
 
 use grains_grid::Grid;
 
+pub mod band;
 pub mod enrichment;
 pub mod epoch;
+pub mod shear_band;
 
 /// Where a cell lies relative to the reconciliation zone (the protocol's codes).
 pub use grains_protocol::wire::Zone;
