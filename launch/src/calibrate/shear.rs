@@ -203,7 +203,199 @@ pub fn band_packing(disks: impl Iterator<Item = (f64, f64)>, lo: f64, hi: f64, w
 
 /// Grain ids: the floor row from 0, the plate row from `PLATE`, the sample from `SAMPLE`.
 const PLATE: u64 = 1 << 32;
-const SAMPLE: u64 = 1 << 33;
+pub const SAMPLE: u64 = 1 << 33;
+
+/// Steps between two reads of the stress (the mean over a run is over these reads).
+const MEASURE: usize = 10;
+/// Steps between two servo updates of the plate.
+pub const SERVO: usize = 50;
+
+/// The shear cell (module doc): a sample of disks between a frozen floor row at y = 0 and a
+/// frozen plate row, periodic along x, no gravity, the plate's vertical speed a servo on σ_yy.
+pub struct ShearCell {
+    pub state: DemState<D2>,
+    pub pipe: DemPipeline<D2>,
+    /// The scene's stable DEM step [s].
+    pub dt: f64,
+    /// The period along x [m].
+    pub width: f64,
+    /// σ_yy held by the plate [Pa].
+    pub pressure: f64,
+    /// Mean grain diameter [m] and grain density [kg/m³].
+    pub diameter: f64,
+    pub density: f64,
+}
+
+impl ShearCell {
+    /// `grains` disks of material `material` of `scene` on a jittered lattice of `cols` columns
+    /// (the period is `cols` lattice spacings), at rest, not yet consolidated.
+    pub fn new(
+        scene: &Scene,
+        material: usize,
+        grains: usize,
+        cols: usize,
+        pressure: f64,
+        seed: u64,
+        threads: usize,
+    ) -> anyhow::Result<Self> {
+        if scene.dimension != Dimension::Two {
+            bail!(crate::run::BadInput("the shear cell is 2D (disks); 3D is not built yet".into()));
+        }
+        let mat = &scene.materials[material];
+        let dem = mat.dem.as_ref().context("a DEM material")?;
+        let params = grains_dem_service::setup::contact_params(dem);
+        let r = dem.radius;
+        let d = 2.0 * r;
+        let r_max = r + 2.0 * dem.radius_std;
+        let spacing = Self::spacing(dem);
+        let cols = cols.max(8) as f64;
+        let width = cols * spacing;
+        let rows = (grains as f64 / cols).ceil();
+        let height = rows * spacing * 3f64.sqrt() / 2.0 + 2.0 * r_max;
+        let mut state = DemState::<D2> {
+            grains: Grains::default(),
+            bodies: Vec::new(),
+            walls: Vec::new(),
+            params: DemParams {
+                materials: vec![params],
+                gravity: D2::from_array([0.0; 3]),
+                domain: Domain {
+                    min: [0.0, -height, 0.0],
+                    max: [width, 3.0 * height, 0.0],
+                    periodic: [true, false, false],
+                },
+                skin: 0.1 * d,
+            },
+            time: 0.0,
+        };
+        // The rows: grains of the mean radius a shade apart (a whole number across the period).
+        let per_row = (width / (2.02 * r)).floor() as u64;
+        let plate_y0 = r + height + r;
+        for k in 0..per_row {
+            let x = (k as f64 + 0.5) * width / per_row as f64;
+            for (id, y) in [(k, 0.0), (PLATE + k, plate_y0)] {
+                let i = state
+                    .grains
+                    .push(id, D2::from_array([x, y, 0.0]), r, Grains::<D2>::mass_of(r, mat.density), 0);
+                state.grains.frozen[i] = true;
+            }
+        }
+        let mut rng = Rng::new(seed);
+        let sites = lattice_in_box::<D2>([0.0, r, 0.0], [width, r + height, 0.0], spacing, 1.01 * r_max, 0.01 * r, &mut rng);
+        for (k, &x) in sites.iter().enumerate() {
+            let ri = radius(&mut rng, r, dem.radius_std);
+            state
+                .grains
+                .push(SAMPLE + k as u64, x, ri, Grains::<D2>::mass_of(ri, mat.density), 0);
+        }
+        let (dt, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
+        Ok(Self {
+            state,
+            pipe: DemPipeline::<D2>::new(threads)?,
+            dt,
+            width,
+            pressure,
+            diameter: d,
+            density: mat.density,
+        })
+    }
+
+    /// The lattice spacing the sample starts on: the largest grain (mean + 2 std) with 2% room.
+    pub fn spacing(dem: &grains_protocol::scene::DemMaterial) -> f64 {
+        2.04 * (dem.radius + 2.0 * dem.radius_std)
+    }
+
+    /// The plate row's height (the floor row is at y = 0) [m].
+    pub fn plate_y(&self) -> f64 {
+        let k = self
+            .state
+            .grains
+            .id
+            .iter()
+            .position(|id| (PLATE..SAMPLE).contains(id))
+            .expect("the plate");
+        D2::to_array(self.state.grains.x[k])[1]
+    }
+
+    /// Drives the plate row at (vx, vy).
+    pub fn drive(&mut self, vx: f64, vy: f64) {
+        for (id, v) in self.state.grains.id.iter().zip(self.state.grains.v.iter_mut()) {
+            if (PLATE..SAMPLE).contains(id) {
+                *v = D2::from_array([vx, vy, 0.0]);
+            }
+        }
+    }
+
+    /// The shear rate of inertial number `i` at the cell's pressure [1/s].
+    pub fn rate_of(&self, i: f64) -> f64 {
+        i * (self.pressure / self.density).sqrt() / self.diameter
+    }
+
+    /// Runs `n` steps; the cell's stress [σxx, σyy, σxy] (Love–Weber, symmetrized, compression
+    /// positive) averaged over reads every MEASURE steps.
+    pub fn run(&mut self, n: usize) -> [f64; 3] {
+        let mut sum = [0.0; 3];
+        let reads = (n / MEASURE).max(1);
+        for _ in 0..reads {
+            self.pipe.run(&mut self.state, self.dt, MEASURE);
+            let area = self.width * self.plate_y();
+            for (_, _, f, b) in self.pipe.contact_forces(&self.state) {
+                let (f, b) = (D2::to_array(f), D2::to_array(b));
+                sum[0] += f[0] * b[0] / area;
+                sum[1] += f[1] * b[1] / area;
+                sum[2] += 0.5 * (f[0] * b[1] + f[1] * b[0]) / area;
+            }
+        }
+        sum.map(|s| s / reads as f64)
+    }
+
+    /// The plate's servo: v_y = −(1 − σyy / p) γ̇_ref H, γ̇_ref the rate of I = 1e-3 or
+    /// `rate` if faster (a quicker servo rings, as in the biaxial test); v_x as given.
+    pub fn servo(&mut self, syy: f64, vx: f64, rate: f64) {
+        let h = self.plate_y();
+        let error = (1.0 - syy / self.pressure).clamp(-1.0, 1.0);
+        let vy = -error * rate.max(self.rate_of(1e-3)) * h;
+        self.drive(vx, vy);
+    }
+
+    /// Consolidation to the pressure at rest (damped, as the biaxial test's), at most 2 s.
+    pub fn consolidate(&mut self) -> anyhow::Result<()> {
+        let pressure = self.pressure;
+        for _ in 0..((2.0 / self.dt) as usize / SERVO) {
+            if grains_service::signals::signalled() {
+                bail!("stopped by a signal");
+            }
+            let s = self.run(SERVO);
+            let g = &mut self.state.grains;
+            g.v.iter_mut().zip(&g.frozen).filter(|(_, f)| !**f).for_each(|(v, _)| *v *= 0.98);
+            g.omega.iter_mut().for_each(|w| *w *= 0.98);
+            let h = self.plate_y();
+            // The sample's translational energy (the plate's own motion is not the sample's).
+            let g = &self.state.grains;
+            let ke: f64 = (0..g.len())
+                .filter(|&i| !g.frozen[i])
+                .map(|i| 0.5 * g.mass[i] * g.v[i].length_squared())
+                .sum();
+            if (s[1] / pressure - 1.0).abs() < 0.02 && ke < 1e-5 * pressure * self.width * h {
+                return Ok(());
+            }
+            self.servo(s[1], 0.0, 0.0);
+        }
+        bail!("the shear cell did not settle at {pressure:.1} Pa within 2 s: stiffness, pressure or grain count out of reach")
+    }
+
+    /// The packing fraction of the middle half of the gap (the layers by the rows are looser,
+    /// as by any wall): the disks whose centres lie in it over its area, the estimator that
+    /// reads a bed's packing the same way (`grains pack`'s output by depth).
+    pub fn packing(&self) -> f64 {
+        let top = self.plate_y();
+        let g = &self.state.grains;
+        let disks = (0..g.len())
+            .filter(|&i| !g.frozen[i])
+            .map(|i| (D2::to_array(g.x[i])[1], g.radius[i]));
+        band_packing(disks, 0.25 * top, 0.75 * top, self.width)
+    }
+}
 
 /// Runs the shear cell of material `material` of `scene` at each of `inertials` (increasing).
 pub fn simple_shear(
@@ -215,146 +407,18 @@ pub fn simple_shear(
     strain: f64,
     seed: u64,
 ) -> anyhow::Result<Shear> {
-    if scene.dimension != Dimension::Two {
-        bail!(crate::run::BadInput(
-            "grains calibrate --shear runs the 2D shear cell; 3D is not built yet".into()
-        ));
-    }
-    let mat = &scene.materials[material];
-    let dem = mat.dem.as_ref().context("a DEM material")?;
-    let params = grains_dem_service::setup::contact_params(dem);
-    let r = dem.radius;
-    let d = 2.0 * r;
-    let r_max = r + 2.0 * dem.radius_std;
-    let spacing = 2.04 * r_max;
     // Twice as wide as tall: cols ≈ √(N √3) columns of N / cols rows.
-    let cols = (grains as f64 * 3f64.sqrt()).sqrt().round().max(8.0);
-    let width = cols * spacing;
-    let rows = (grains as f64 / cols).ceil();
-    let height = rows * spacing * 3f64.sqrt() / 2.0 + 2.0 * r_max;
-    let mut state = DemState::<D2> {
-        grains: Grains::default(),
-        bodies: Vec::new(),
-        walls: Vec::new(),
-        params: DemParams {
-            materials: vec![params],
-            gravity: D2::from_array([0.0; 3]),
-            domain: Domain {
-                min: [0.0, -height, 0.0],
-                max: [width, 3.0 * height, 0.0],
-                periodic: [true, false, false],
-            },
-            skin: 0.1 * d,
-        },
-        time: 0.0,
-    };
-    // The rows: grains of the mean radius a shade apart (a whole number across the period).
-    let per_row = (width / (2.02 * r)).floor() as u64;
-    let (floor_y, plate_y0) = (0.0, r + height + r);
-    for k in 0..per_row {
-        let x = (k as f64 + 0.5) * width / per_row as f64;
-        for (id, y) in [(k, floor_y), (PLATE + k, plate_y0)] {
-            let i = state
-                .grains
-                .push(id, D2::from_array([x, y, 0.0]), r, Grains::<D2>::mass_of(r, mat.density), 0);
-            state.grains.frozen[i] = true;
-        }
-    }
-    let mut rng = Rng::new(seed);
-    let sites = lattice_in_box::<D2>([0.0, r, 0.0], [width, r + height, 0.0], spacing, 1.01 * r_max, 0.01 * r, &mut rng);
-    for (k, &x) in sites.iter().enumerate() {
-        let ri = radius(&mut rng, r, dem.radius_std);
-        state
-            .grains
-            .push(SAMPLE + k as u64, x, ri, Grains::<D2>::mass_of(ri, mat.density), 0);
-    }
-    let (dt, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
-    let mut pipe = DemPipeline::<D2>::new(super::THREADS)?;
-    let rate_of = |i: f64| i * (pressure / mat.density).sqrt() / d;
-    let plate_y = |st: &DemState<D2>| -> f64 {
-        let k = st.grains.id.iter().position(|id| (PLATE..SAMPLE).contains(id)).expect("the plate");
-        D2::to_array(st.grains.x[k])[1]
-    };
-    let drive = |st: &mut DemState<D2>, vx: f64, vy: f64| {
-        for (id, v) in st.grains.id.iter().zip(st.grains.v.iter_mut()) {
-            if (PLATE..SAMPLE).contains(id) {
-                *v = D2::from_array([vx, vy, 0.0]);
-            }
-        }
-    };
-    // The cell's stress [σxx, σyy, σxy] (Love–Weber, symmetrized) averaged over `n` steps,
-    // read every MEASURE steps.
-    const MEASURE: usize = 10;
-    let run = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, n: usize| -> [f64; 3] {
-        let mut sum = [0.0; 3];
-        let reads = (n / MEASURE).max(1);
-        for _ in 0..reads {
-            pipe.run(st, dt, MEASURE);
-            let area = width * (plate_y(st) - floor_y);
-            for (_, _, f, b) in pipe.contact_forces(st) {
-                let (f, b) = (D2::to_array(f), D2::to_array(b));
-                sum[0] += f[0] * b[0] / area;
-                sum[1] += f[1] * b[1] / area;
-                sum[2] += 0.5 * (f[0] * b[1] + f[1] * b[0]) / area;
-            }
-        }
-        sum.map(|s| s / reads as f64)
-    };
-    // The plate's servo, every SERVO steps: v_y = −(1 − σyy / p) γ̇_ref H, γ̇_ref the
-    // rate of I = 1e-3 or the shear's if faster (a quicker servo rings, as in the biaxial test).
-    const SERVO: usize = 50;
-    let servo = |st: &mut DemState<D2>, syy: f64, vx: f64, rate: f64| {
-        let h = plate_y(st) - floor_y;
-        let error = (1.0 - syy / pressure).clamp(-1.0, 1.0);
-        drive(st, vx, -error * rate.max(rate_of(1e-3)) * h);
-    };
-    // Consolidation to p at rest (damped, as the biaxial test's), at most 2 s.
-    let mut settled = false;
-    for _ in 0..((2.0 / dt) as usize / SERVO) {
-        if grains_service::signals::signalled() {
-            bail!("stopped by a signal");
-        }
-        let s = run(&mut state, &mut pipe, SERVO);
-        state
-            .grains
-            .v
-            .iter_mut()
-            .zip(&state.grains.frozen)
-            .filter(|(_, f)| !**f)
-            .for_each(|(v, _)| *v *= 0.98);
-        state.grains.omega.iter_mut().for_each(|w| *w *= 0.98);
-        let h = plate_y(&state) - floor_y;
-        // The sample's translational energy (the plate's own motion is not the sample's).
-        let g = &state.grains;
-        let ke: f64 = (0..g.len())
-            .filter(|&i| !g.frozen[i])
-            .map(|i| 0.5 * g.mass[i] * g.v[i].length_squared())
-            .sum();
-        if (s[1] / pressure - 1.0).abs() < 0.02 && ke < 1e-5 * pressure * width * h {
-            settled = true;
-            break;
-        }
-        servo(&mut state, s[1], 0.0, 0.0);
-    }
-    if !settled {
-        bail!("the shear cell did not settle at {pressure:.1} Pa within 2 s: stiffness, pressure or grain count out of reach");
-    }
-    // The packing fraction of the middle half of the gap (the layers by the rows are looser,
-    // as by any wall): the disks whose centres lie in it over its area, the estimator that
-    // reads a bed's packing the same way (`grains pack`'s output by depth).
-    let packing = |st: &DemState<D2>| {
-        let top = plate_y(st);
-        let g = &st.grains;
-        let disks = (0..g.len())
-            .filter(|&i| !g.frozen[i])
-            .map(|i| (D2::to_array(g.x[i])[1], g.radius[i]));
-        band_packing(disks, floor_y + 0.25 * (top - floor_y), floor_y + 0.75 * (top - floor_y), width)
-    };
-    let packing0 = packing(&state);
+    let cols = (grains as f64 * 3f64.sqrt()).sqrt().round() as usize;
+    let mut cell = ShearCell::new(scene, material, grains, cols, pressure, seed, super::THREADS)?;
+    cell.consolidate()?;
+    let dt = cell.dt;
+    let d = cell.diameter;
+    let density = cell.density;
+    let packing0 = cell.packing();
     let mut out = Vec::new();
     let mut transient = Vec::new();
     for &target in inertials {
-        let rate = rate_of(target);
+        let rate = cell.rate_of(target);
         let total = (strain / rate / dt) as usize;
         let warm = total / 4;
         let mut windows: Vec<[f64; 3]> = Vec::new();
@@ -363,10 +427,10 @@ pub fn simple_shear(
             if grains_service::signals::signalled() {
                 bail!("stopped by a signal");
             }
-            let v = rate * (plate_y(&state) - floor_y);
-            servo(&mut state, s[1], v, rate);
-            s = run(&mut state, &mut pipe, SERVO);
-            if let Some(id) = DemPipeline::first_non_finite(&state) {
+            let v = rate * cell.plate_y();
+            cell.servo(s[1], v, rate);
+            s = cell.run(SERVO);
+            if let Some(id) = DemPipeline::first_non_finite(&cell.state) {
                 bail!("grain {id} is not finite: the shear cell blew up at I = {target}");
             }
             if step >= warm {
@@ -381,7 +445,7 @@ pub fn simple_shear(
                     strain: bin,
                     sin_phi: (0.25 * (s[0] - s[1]).powi(2) + s[2] * s[2]).sqrt() / p,
                     mu: s[2].abs() / s[1],
-                    packing: packing(&state),
+                    packing: cell.packing(),
                 };
                 transient.push((1usize, rec));
                 // Merge into the bin's running mean.
@@ -417,7 +481,7 @@ pub fn simple_shear(
         let (p, sin_phi) = of(&all);
         let subs: Vec<f64> = means.iter().map(|m| of(m).1).collect();
         let spread = (subs.iter().map(|x| (x - sin_phi).powi(2)).sum::<f64>() / subs.len() as f64).sqrt();
-        let inertial = rate * d / (p / mat.density).sqrt();
+        let inertial = rate * d / (p / density).sqrt();
         tracing::info!(
             "calibrate --shear: I = {target:e} (measured {inertial:.3e}): p {p:.1} Pa, phi {:.2} deg (sd {:.2})",
             sin_phi.asin().to_degrees(),

@@ -21,10 +21,12 @@ pub enum PartName {
     Cost,
     /// Rigid bodies in contact with a continuum (Jiang 2020 §5).
     Sdem,
+    /// Shear bands (Chen 2021): the DEM planar shear's band thickness so far.
+    Shear,
 }
 
 impl PartName {
-    pub const ALL: [PartName; 7] = [
+    pub const ALL: [PartName; 8] = [
         PartName::Contact,
         PartName::Stability,
         PartName::Column,
@@ -32,6 +34,7 @@ impl PartName {
         PartName::Drum,
         PartName::Cost,
         PartName::Sdem,
+        PartName::Shear,
     ];
 
     pub fn name(self) -> &'static str {
@@ -43,13 +46,14 @@ impl PartName {
             PartName::Drum => "drum",
             PartName::Cost => "cost",
             PartName::Sdem => "sdem",
+            PartName::Shear => "shear",
         }
     }
 
     /// In CI's `--quick` set (the drum and the accuracy–cost runs take too long for it; the
-    /// rigid bodies' checks that CI needs are tests of their own).
+    /// rigid bodies' and the band measure's checks that CI needs are tests of their own).
     pub fn quick(self) -> bool {
-        !matches!(self, PartName::Drum | PartName::Cost | PartName::Sdem)
+        !matches!(self, PartName::Drum | PartName::Cost | PartName::Sdem | PartName::Shear)
     }
 }
 

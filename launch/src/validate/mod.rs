@@ -8,7 +8,8 @@
 //!   Fig. 5), runouts against Lube et al. 2005 and Yue 2018's laws;
 //! - [`silo`], [`drum`]: discharge, Beverloo, clogging, bouncing; the angle of a turning drum;
 //! - [`cost`]: error against wall time, with the Pareto front;
-//! - [`sdem`]: rigid bodies in contact with a continuum (Jiang 2020 §5).
+//! - [`sdem`]: rigid bodies in contact with a continuum (Jiang 2020 §5);
+//! - [`shear`]: shear bands (Chen 2021): the DEM planar shear's band so far.
 //!
 //! Below the parts: [`runs`] (running scenes, reading what a run did), [`packings`] (every
 //! packing poured, in one place), [`deposit`] (frames and deposits read back), [`pictures`]
@@ -30,6 +31,7 @@ pub mod pictures;
 pub mod runs;
 pub mod scenes;
 pub mod sdem;
+pub mod shear;
 pub mod silo;
 pub mod stability;
 pub mod stats;
@@ -111,6 +113,7 @@ fn run_part(p: PartName, args: &ValidateArgs) -> anyhow::Result<Part> {
         PartName::Drum => drum::validate(args),
         PartName::Cost => cost::validate(args),
         PartName::Sdem => sdem::validate(args),
+        PartName::Shear => shear::validate(args),
     }
 }
 
