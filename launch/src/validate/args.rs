@@ -21,7 +21,7 @@ pub enum PartName {
     Cost,
     /// Rigid bodies in contact with a continuum (Jiang 2020 §5).
     Sdem,
-    /// Shear bands (Chen 2021): the DEM planar shear's band thickness so far.
+    /// Shear bands (Chen 2021): the planar shear as DEM and as a continuum with the oracle.
     Shear,
 }
 

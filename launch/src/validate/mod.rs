@@ -9,7 +9,8 @@
 //! - [`silo`], [`drum`]: discharge, Beverloo, clogging, bouncing; the angle of a turning drum;
 //! - [`cost`]: error against wall time, with the Pareto front;
 //! - [`sdem`]: rigid bodies in contact with a continuum (Jiang 2020 §5);
-//! - [`shear`]: shear bands (Chen 2021): the DEM planar shear's band so far.
+//! - [`shear`]: shear bands (Chen 2021): the planar shear as DEM and as a continuum with the
+//!   shear-band oracle.
 //!
 //! Below the parts: [`runs`] (running scenes, reading what a run did), [`packings`] (every
 //! packing poured, in one place), [`deposit`] (frames and deposits read back), [`pictures`]
