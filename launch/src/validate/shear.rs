@@ -1,8 +1,8 @@
 //! `grains validate --part shear`: shear bands (Chen 2021). So far the planar shear of §6.1 as
 //! a DEM (the ground truth) and as a continuum watched by the shear-band oracle (Alg. 1); the
 //! hybrid (enrichment, kinematic training) is not built. The DEM planar shear of §6.1 (Table
-//! 3: 6 × 12 cm, 7,640 grains of Table 1, periodic along the shear, the bottom fixed, the top driven sideways under a constant normal stress), with the
-//! band measured by App. A's rule ([`grains_oracle::band`]): its thickness against the paper's
+//! 3: 6 × 12 cm, 7,640 grains of Table 1, periodic along the shear, the bottom fixed, the top
+//! driven sideways under a constant normal stress), with the band measured by App. A's rule ([`grains_oracle::band`]): its thickness against the paper's
 //! 22 D50, the stress against strain (Fig. 10: softening as the band forms), and the
 //! incremental strain's profile across the specimen.
 //!
