@@ -2,9 +2,10 @@
 //! a DEM (the ground truth) and as a continuum watched by the shear-band oracle (Alg. 1); the
 //! hybrid (enrichment, kinematic training) is not built. The DEM planar shear of §6.1 (Table
 //! 3: 6 × 12 cm, 7,640 grains of Table 1, periodic along the shear, the bottom fixed, the top
-//! driven sideways under a constant normal stress), with the band measured by App. A's rule ([`grains_oracle::band`]): its thickness against the paper's
-//! 22 D50, the stress against strain (Fig. 10: softening as the band forms), and the
-//! incremental strain's profile across the specimen.
+//! driven sideways under a constant normal stress), with the band measured by App. A's rule
+//! ([`grains_oracle::band`]): its thickness against the paper's 22 D50, the stress against
+//! strain (Fig. 10: softening as the band forms), and the incremental strain's profile across
+//! the specimen.
 //!
 //! The grains are the column scenes' glass beads, which are Chen's Table 1 (k_n 1.77e6 N/m,
 //! γ 7 N s/m, d 1 ± 0.08 mm, ρ 2530, μ 0.5). Chen's γ_n = 7 N s/m at e = 0.1 fixes its grain
@@ -179,21 +180,9 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
     let late: Vec<f64> = curve.iter().filter(|p| p.0 >= WINDOW.0).map(|p| p.1).collect();
     let residual = late.iter().sum::<f64>() / late.len().max(1) as f64;
 
-    // The incremental strain's profile: mean over slabs 2 D50 thick, by height at the window's start.
-    let slab = 2.0 * d;
-    let mut bins: Vec<(f64, usize)> = vec![(0.0, 0); (height0 / slab).ceil() as usize + 2];
-    for (p, e) in x0.iter().zip(&strain) {
-        let k = ((p[1] / slab).floor().max(0.0) as usize).min(bins.len() - 1);
-        bins[k].0 += e;
-        bins[k].1 += 1;
-    }
-    let profile: Vec<(f64, f64)> = bins
-        .iter()
-        .enumerate()
-        .filter(|(_, b)| b.1 > 0)
-        .map(|(k, b)| (b.0 / b.1 as f64, (k as f64 + 0.5) * slab / d))
-        .collect();
-    let fwhm = half_peak_width(&profile, slab / d);
+    // The incremental strain's profile, by height at the window's start.
+    let profile = slab_profile(x0.iter().zip(&strain).map(|(p, &e)| (p[1], e)), height0, d);
+    let fwhm = half_peak_width(&profile, SLAB_D);
 
     let _ = writeln!(
         md,
@@ -297,6 +286,27 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         t_s,
         profile,
     })
+}
+
+/// Slabs of the strain profiles [D50].
+const SLAB_D: f64 = 2.0;
+
+/// The mean of a value over horizontal slabs SLAB_D grains thick from the floor up to `height`
+/// (and a little above, for dilation), from (height, value) samples: (mean, slab centre in
+/// D50) for every slab holding a sample.
+fn slab_profile(samples: impl Iterator<Item = (f64, f64)>, height: f64, d: f64) -> Vec<(f64, f64)> {
+    let slab = SLAB_D * d;
+    let mut bins: Vec<(f64, usize)> = vec![(0.0, 0); (height / slab).ceil() as usize + 4];
+    for (y, v) in samples {
+        let k = ((y / slab).floor().max(0.0) as usize).min(bins.len() - 1);
+        bins[k].0 += v;
+        bins[k].1 += 1;
+    }
+    bins.iter()
+        .enumerate()
+        .filter(|(_, b)| b.1 > 0)
+        .map(|(k, b)| (b.0 / b.1 as f64, (k as f64 + 0.5) * SLAB_D))
+        .collect()
 }
 
 /// The width of a profile (value, height) at half its peak, in the profile's height unit: the
@@ -684,22 +694,9 @@ fn continuum_run(
     // The incremental strain of each point over the window: its plastic strain grown (the
     // points' own measure, as Chen colours its MPM points), by slabs 2 D50 thick.
     let from = reference.context("the continuum's shear reached the window's start")?;
-    let slab = 2.0 * d;
-    let mut bins: Vec<(f64, usize)> = vec![(0.0, 0); (height / slab).ceil() as usize + 4];
-    for k in 0..pts.len() {
-        if let Some((x0, e0)) = from.get(&pts.id[k]) {
-            let b = ((x0[1] / slab).floor().max(0.0) as usize).min(bins.len() - 1);
-            bins[b].0 += pts.plastic_strain[k] - e0;
-            bins[b].1 += 1;
-        }
-    }
-    let profile: Vec<(f64, f64)> = bins
-        .iter()
-        .enumerate()
-        .filter(|(_, b)| b.1 > 0)
-        .map(|(k, b)| (b.0 / b.1 as f64, (k as f64 + 0.5) * slab / d))
-        .collect();
-    let fwhm = half_peak_width(&profile, slab / d);
+    let grown = (0..pts.len()).filter_map(|k| from.get(&pts.id[k]).map(|(x0, e0)| (x0[1], pts.plastic_strain[k] - e0)));
+    let profile = slab_profile(grown, height, d);
+    let fwhm = half_peak_width(&profile, SLAB_D);
     Ok(ContinuumShear {
         cell: h,
         points: n,
