@@ -603,6 +603,10 @@ mod tests {
         assert!(e.to_string().contains("100.500000 cells"), "{e}");
         let e = load_with_overrides(&path, &["oracle={kind=\"surface\"}".into()]).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("oracle.kind"), "{e}");
+        // The shear-band oracle is refused by name, with what exists of it.
+        let e = load_with_overrides(&path, &["oracle={kind=\"shear_band\"}".into()]).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("oracle.kind"), "{e}");
+        assert!(e.to_string().contains("validate --part shear"), "{e}");
         // A DEM-only periodic domain needs neither.
         let dem = [
             "domain.max=[0.201,0.08]".into(),
