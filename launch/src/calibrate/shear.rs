@@ -338,15 +338,42 @@ impl ShearCell {
         let reads = (n / MEASURE).max(1);
         for _ in 0..reads {
             self.pipe.run(&mut self.state, self.dt, MEASURE);
-            let area = self.width * self.plate_y();
-            for (_, _, f, b) in self.pipe.contact_forces(&self.state) {
-                let (f, b) = (D2::to_array(f), D2::to_array(b));
-                sum[0] += f[0] * b[0] / area;
-                sum[1] += f[1] * b[1] / area;
-                sum[2] += 0.5 * (f[0] * b[1] + f[1] * b[0]) / area;
-            }
+            let s = self.stress();
+            (0..3).for_each(|k| sum[k] += s[k]);
         }
         sum.map(|s| s / reads as f64)
+    }
+
+    /// The small-strain moduli of the cell as it stands, from two probes of `strain` (Chen
+    /// 2021 §2.2 takes K and G of its continuum from DEM element tests): the plate moved
+    /// sideways (simple shear, G = Δσ_xy / Δγ), then down with the sides periodic (confined
+    /// compression, the constrained modulus M = Δσ_yy / Δε_yy = K + G for a 2D bulk modulus
+    /// K). Each probe ramps over 2,000 steps and rests 2,000 more; the stress is the mean
+    /// over the last 500. Returns (K, G) [Pa]; the cell is left strained by both probes.
+    pub fn moduli(&mut self, strain: f64) -> (f64, f64) {
+        const RAMP: usize = 2000;
+        let rested = |cell: &mut Self| {
+            cell.drive(0.0, 0.0);
+            cell.run(RAMP - 500);
+            cell.run(500)
+        };
+        let s0 = rested(self);
+        let speed = strain * self.plate_y() / (RAMP as f64 * self.dt);
+        self.drive(speed, 0.0);
+        self.run(RAMP);
+        let s1 = rested(self);
+        self.drive(0.0, -speed);
+        self.run(RAMP);
+        let s2 = rested(self);
+        let shear = (s1[2] - s0[2]).abs() / strain;
+        let constrained = (s2[1] - s1[1]) / strain;
+        (constrained - shear, shear)
+    }
+
+    /// The cell's stress now [σxx, σyy, σxy] (Love–Weber over the contacts, symmetrized,
+    /// compression positive); the contacts must be known (after a step).
+    pub fn stress(&self) -> [f64; 3] {
+        love_weber(&self.pipe, &self.state, self.width * self.plate_y())
     }
 
     /// The plate's servo: v_y = −(1 − σyy / p) γ̇_ref H, γ̇_ref the rate of I = 1e-3 or
@@ -395,6 +422,19 @@ impl ShearCell {
             .map(|i| (D2::to_array(g.x[i])[1], g.radius[i]));
         band_packing(disks, 0.25 * top, 0.75 * top, self.width)
     }
+}
+
+/// The stress of a 2D packing over `area` [σxx, σyy, σxy] (Love–Weber over its contacts,
+/// symmetrized, compression positive); the contacts must be known (after a step).
+pub fn love_weber(pipe: &DemPipeline<D2>, state: &DemState<D2>, area: f64) -> [f64; 3] {
+    let mut sum = [0.0; 3];
+    for (_, _, f, b) in pipe.contact_forces(state) {
+        let (f, b) = (D2::to_array(f), D2::to_array(b));
+        sum[0] += f[0] * b[0] / area;
+        sum[1] += f[1] * b[1] / area;
+        sum[2] += 0.5 * (f[0] * b[1] + f[1] * b[0]) / area;
+    }
+    sum
 }
 
 /// Runs the shear cell of material `material` of `scene` at each of `inertials` (increasing).

@@ -12,6 +12,8 @@
 //! - [`packing`]: initial placements (seeded jittered lattices; the radii are drawn with
 //!   `grains_grid::rng`);
 //! - [`coupling`]: the kernels of the DEM side of the grid-vs-grid coupling (Yue 2018 Alg. 4–5);
+//! - [`training`]: kinematic training of a packing through a continuum's deformation history
+//!   by its boundary (Chen 2021 §4.1.1);
 //! - [`coupled`]: the DEM half of a coupled macro-step over them (Alg. 2, 4–6), split at the
 //!   coupling point: [`coupled::CoupledStep`].
 //!
@@ -25,6 +27,7 @@ pub mod neighbors;
 pub mod packing;
 pub mod pipeline;
 pub mod state;
+pub mod training;
 
 /// The dimension as a type, shared with every service (`grains-grid`).
 pub use grains_grid::space;

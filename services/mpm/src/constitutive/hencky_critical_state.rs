@@ -282,6 +282,70 @@ pub fn return_map<M: Matrix>(m: &HenckyCriticalState, b_trial: &M, state: &mut P
     (b, M::from_eigen(principal_stress(m, &e_new, d), &q))
 }
 
+/// One state of the model's [`simple_shear`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShearState {
+    /// Time since the start [s] and shear strain γ (the top's travel over the height).
+    pub time: f64,
+    pub strain: f64,
+    /// The normal strain rate ε̇_yy over the step that held σ_yy [1/s] (dilation positive).
+    pub normal_rate: f64,
+    /// Cauchy stress after the step [Pa], tension positive.
+    pub sxx: f64,
+    pub syy: f64,
+    pub sxy: f64,
+    pub packing: f64,
+}
+
+/// The model's 2D simple shear under a constant normal stress: the shear cell's test as one
+/// element. From the isotropic stress −p (Hencky: b^e = e^(−p/K) I) at packing `packing`, the
+/// velocity gradient [[0, γ̇], [0, ε̇_yy]] to shear strain `strain` in `steps` steps, ε̇_yy
+/// each step the one that keeps σ_yy = −p (secant iterations). The states after each step.
+pub fn simple_shear(m: &HenckyCriticalState, packing: f64, pressure: f64, rate: f64, strain: f64, steps: usize) -> Vec<ShearState> {
+    use glam::{DMat2, DVec2};
+    let dt = strain / rate / steps as f64;
+    let mut b = DMat2::IDENTITY * (-pressure / m.bulk).exp();
+    let mut state = PointState {
+        packing,
+        ..PointState::default()
+    };
+    let mut jacobian = 1.0;
+    let mut normal_rate = 0.0;
+    let trial = |e: f64, b: &DMat2, state: &PointState, jacobian: f64| {
+        let f = DMat2::IDENTITY + DMat2::from_cols(DVec2::ZERO, DVec2::new(rate, e)) * dt;
+        let mut s = *state;
+        let (b_new, tau) = return_map(m, &(f * *b * f.transpose()), &mut s, dt);
+        let j = jacobian * f.determinant();
+        (b_new, tau, s, j, tau.y_axis.y / j + pressure)
+    };
+    let mut out = Vec::with_capacity(steps);
+    for step in 0..steps {
+        let (mut e0, mut e1) = (normal_rate, normal_rate + 1e-3 * rate);
+        let mut r0 = trial(e0, &b, &state, jacobian).4;
+        let mut next = trial(e1, &b, &state, jacobian);
+        for _ in 0..30 {
+            if next.4.abs() <= 1e-9 * pressure || next.4 == r0 {
+                break;
+            }
+            let e2 = e1 - next.4 * (e1 - e0) / (next.4 - r0);
+            (e0, r0, e1) = (e1, next.4, e2);
+            next = trial(e1, &b, &state, jacobian);
+        }
+        let (b_new, tau, s, j, _) = next;
+        (b, state, jacobian, normal_rate) = (b_new, s, j, e1);
+        out.push(ShearState {
+            time: (step + 1) as f64 * dt,
+            strain: (step + 1) as f64 * dt * rate,
+            normal_rate,
+            sxx: tau.x_axis.x / j,
+            syy: tau.y_axis.y / j,
+            sxy: tau.y_axis.x / j,
+            packing: state.packing,
+        });
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,6 +459,37 @@ mod tests {
         assert_eq!(m.cone(0.70, 3).eta, 0.0);
         assert_eq!(m.wave_speed_modulus(2), 630e6 + 460e6);
         assert!((m.wave_speed_modulus(3) - (630e6 + 4.0 / 3.0 * 460e6)).abs() < 1e-6);
+    }
+
+    /// The element simple shear holds σ_yy at −p on every step; while elastic its shear
+    /// stress is G γ (Hencky at small strain); it ends at the critical state of steady simple
+    /// shear: Φ = Φ_cs, no volume change, and (the principal axes at 45°, σ_xx = σ_yy) the
+    /// 2D cone's √J₂ = sin φ_cs p is |σ_xy| = sin φ_cs p (Mohr–Coulomb in simple shear).
+    #[test]
+    fn simple_shear_holds_its_normal_stress_and_ends_at_the_critical_state() {
+        let m = HenckyCriticalState {
+            bulk: 2.0e5,
+            shear: 1.08e5,
+            tan_friction_cs: 0.28,
+            packing_cs: 0.8157,
+            chi: 7.0,
+            xi: 5.5,
+            cohesion: 0.0,
+        };
+        let (p, rate) = (4.0e3, 2.0);
+        let out = simple_shear(&m, 0.83, p, rate, 3.0, 30_000);
+        let worst = out.iter().map(|s| (s.syy + p).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-6 * p, "σ_yy off by {worst} Pa");
+        let first = out[0];
+        assert!((first.sxy.abs() / (m.shear * first.strain) - 1.0).abs() < 1e-3, "{first:?}");
+        // A dense start dilates, then stops.
+        assert!(out.iter().any(|s| s.normal_rate > 0.05 * rate));
+        let end = *out.last().unwrap();
+        assert!((end.packing - m.packing_cs).abs() < 1e-4, "{end:?}");
+        assert!(end.normal_rate.abs() < 1e-3 * rate, "{end:?}");
+        let sin_cs = m.tan_friction_cs / (1.0 + m.tan_friction_cs.powi(2)).sqrt();
+        let pressure = -0.5 * (end.sxx + end.syy);
+        assert!((end.sxy.abs() / pressure / sin_cs - 1.0).abs() < 0.01, "{end:?}, sin φ_cs {sin_cs}");
     }
 
     #[test]
