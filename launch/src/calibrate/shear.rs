@@ -224,6 +224,10 @@ pub struct ShearCell {
     /// Mean grain diameter [m] and grain density [kg/m³].
     pub diameter: f64,
     pub density: f64,
+    /// Sample grains glued to the plate (sorted ids) and the glued layers' thickness [m]
+    /// ([`ShearCell::glue`]).
+    glued: Vec<u64>,
+    glued_thickness: f64,
 }
 
 impl ShearCell {
@@ -297,6 +301,8 @@ impl ShearCell {
             pressure,
             diameter: d,
             density: mat.density,
+            glued: Vec::new(),
+            glued_thickness: 0.0,
         })
     }
 
@@ -317,10 +323,32 @@ impl ShearCell {
         D2::to_array(self.state.grains.x[k])[1]
     }
 
-    /// Drives the plate row at (vx, vy).
+    /// Glues the sample's grains within `thickness` of the floor row to the floor and those
+    /// within `thickness` of the plate row to the plate: boundaries as rough as the packing,
+    /// so that a band need not form along them (one row of grains is smoother than the bulk).
+    pub fn glue(&mut self, thickness: f64) {
+        let top = self.plate_y();
+        let g = &mut self.state.grains;
+        for i in 0..g.len() {
+            let y = D2::to_array(g.x[i])[1];
+            if g.id[i] >= SAMPLE && (y < thickness || y > top - thickness) {
+                g.frozen[i] = true;
+                g.v[i] = D2::from_array([0.0; 3]);
+                g.omega[i] = 0.0;
+                if y > top - thickness {
+                    self.glued.push(g.id[i]);
+                }
+            }
+        }
+        self.glued.sort_unstable();
+        self.glued_thickness = thickness;
+    }
+
+    /// Drives the plate row (and the grains glued to it) at (vx, vy).
     pub fn drive(&mut self, vx: f64, vy: f64) {
+        let glued = &self.glued;
         for (id, v) in self.state.grains.id.iter().zip(self.state.grains.v.iter_mut()) {
-            if (PLATE..SAMPLE).contains(id) {
+            if (PLATE..SAMPLE).contains(id) || glued.binary_search(id).is_ok() {
                 *v = D2::from_array([vx, vy, 0.0]);
             }
         }
@@ -373,7 +401,8 @@ impl ShearCell {
     /// The cell's stress now [σxx, σyy, σxy] (Love–Weber over the contacts, symmetrized,
     /// compression positive); the contacts must be known (after a step).
     pub fn stress(&self) -> [f64; 3] {
-        love_weber(&self.pipe, &self.state, self.width * self.plate_y())
+        // Contacts between frozen grains are not computed: the glued layers are not counted.
+        love_weber(&self.pipe, &self.state, self.width * (self.plate_y() - 2.0 * self.glued_thickness))
     }
 
     /// The plate's servo: v_y = −(1 − σyy / p) γ̇_ref H, γ̇_ref the rate of I = 1e-3 or
