@@ -9,9 +9,11 @@
 //!   min(c0 / D50², c0 / ΔX²) (§3.1.1) where the recent plastic strain exceeds c1 (§3.2);
 //! - [`window`]: τ = c / γ̇_max, the rate-independent windows τ_l and τ_g (§3.2);
 //! - [`RecentStrain`]: each point's plastic strain over the last τ_l, followed by point id;
-//! - [`Persistence`]: Alg. 1 line 7, a band once the flagged set has stayed the same for τ_g.
+//! - [`Persistence`]: Alg. 1 line 7, a band once the flagged set has stayed the same for τ_g;
+//! - [`zones`]: §4, the enrichment zones from the band: discrete within φ0 of its flagged
+//!   boundary, hybrid over the overlap t_h about φ0, continuum beyond.
 
-use crate::{dims, linear};
+use crate::{Zone, dims, distance_to_level, linear, zone_of_distance};
 use grains_grid::Grid;
 use std::collections::VecDeque;
 
@@ -213,6 +215,34 @@ impl Persistence {
     }
 }
 
+/// Chen 2021 §4 (Fig. 6 c–e): the zone of every cell from the band's flagged cells (its
+/// boundary, as [`flag`] gives it). A cell whose centre lies within φ0 − t_h / 2 of the nearest
+/// flagged cell centre is discrete, within t_h / 2 of φ0 hybrid (the overlap the coupling
+/// needs), continuum beyond; a flagged cell is at distance 0. With nothing flagged every cell
+/// stays continuum. The distance is [`distance_to_level`]'s (first order in the cell width,
+/// exact for a straight band) and does not wrap across a periodic axis.
+pub fn zones(cells: &Grid, dim: usize, flagged: &[bool], phi0: f64, overlap: f64) -> Vec<Zone> {
+    if !flagged.iter().any(|&f| f) {
+        return vec![Zone::Continuum; flagged.len()];
+    }
+    let field: Vec<f64> = flagged.iter().map(|&f| if f { 1.0 } else { 0.0 }).collect();
+    let signed = distance_to_level(cells, dim, &field, 0.5);
+    signed
+        .iter()
+        .zip(flagged)
+        .map(|(&d, &f)| {
+            // Outside the flagged set d < 0 is the distance to the contour, which runs half a
+            // cell from the flagged centres.
+            let from_centre = if f { 0.0 } else { -d + 0.5 * cells.h };
+            if from_centre.is_finite() {
+                zone_of_distance(from_centre, phi0, 0.5 * overlap)
+            } else {
+                Zone::Continuum
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -360,6 +390,36 @@ mod tests {
         assert_eq!(h.records.back().map(|r| r.0), Some(199.0));
         let r = h.recent(199.0, 0.5, &[3], &[199.0]);
         assert!((r[0] - 1.0).abs() < 1e-12, "{r:?}");
+    }
+
+    /// §4: the two flagged edges of a band six cells wide (rows 17 and 22 of 40, h = 1 mm);
+    /// φ0 = 5.2 mm, t_h = 1 mm. Analytic: a row |Δ| rows from the nearer edge is discrete for
+    /// |Δ| h < 4.7 mm, hybrid up to 5.7 mm, continuum beyond (the band's inside, at most 2 rows
+    /// from an edge, discrete). No bound falls on a row, so a half-cell error in the distance
+    /// shows. Nothing flagged: all continuum.
+    #[test]
+    fn zones_reach_phi0_from_the_band_s_boundary_with_the_overlap_about_it() {
+        let h = 1e-3;
+        let g = grid(12, 40, h);
+        let flagged: Vec<bool> = (0..12 * 40).map(|i| matches!(i / 12, 17 | 22)).collect();
+        let z = zones(&g, 2, &flagged, 5.2 * h, h);
+        for (i, zone) in z.iter().enumerate() {
+            let row = (i / 12) as i64;
+            let away = (row - 17).abs().min((row - 22).abs()) as f64;
+            let expected = if away < 4.7 {
+                Zone::Discrete
+            } else if away <= 5.7 {
+                Zone::Hybrid
+            } else {
+                Zone::Continuum
+            };
+            assert_eq!(*zone, expected, "row {row}, {away} rows from the band's edge");
+        }
+        assert!(
+            zones(&g, 2, &vec![false; 12 * 40], 5.0 * h, h)
+                .iter()
+                .all(|z| *z == Zone::Continuum)
+        );
     }
 
     #[test]
