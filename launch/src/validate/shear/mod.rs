@@ -1,0 +1,446 @@
+//! `grains validate --part shear`: shear bands (Chen 2021). So far the planar shear of §6.1 as
+//! a DEM (the ground truth) and as a continuum watched by the shear-band oracle (Alg. 1), and
+//! kinematic training (§4.1.1) of the packing that would replace the continuum's band, against
+//! the DEM's stress (Fig. 13); the enrichment and the hybrid step are not built. The DEM planar shear of §6.1 (Table
+//! 3: 6 × 12 cm, 7,640 grains of Table 1, periodic along the shear, the bottom fixed, the top
+//! driven sideways under a constant normal stress), with the band measured by App. A's rule
+//! ([`grains_oracle::band`]): its thickness against the paper's 22 D50, the stress against
+//! strain (Fig. 10: softening as the band forms), and the incremental strain's profile across
+//! the specimen.
+//!
+//! The grains are the column scenes' glass beads, which are Chen's Table 1 (k_n 1.77e6 N/m,
+//! γ 7 N s/m, d 1 ± 0.08 mm, ρ 2530, μ 0.5). Chen's γ_n = 7 N s/m at e = 0.1 fixes its grain
+//! mass at 2.0e-5 kg: its disks are 1 cm thick, so its 400 kPa is 4 kN/m over a unit-thick
+//! disk of ours. The cell keeps App. F's k_n / (P d) with P = 4 kPa; at that pressure a
+//! unit-thick grain is ten times slower to respond than Chen's, so the top moves at the
+//! speed that gives the band (22 D50) Chen's quasi-static inertial number order, not at
+//! its 2 cm/s (see [`BAND_INERTIAL`]). The packing is prepared as Chen's (Cundall 1989): consolidated with μ = 0.01,
+//! then sheared with μ = 0.5. The cell is the one `grains calibrate --shear` uses
+//! ([`crate::calibrate::shear::ShearCell`]): rough floor and plate rows of frozen grains, the
+//! plate's servo holding σ_yy.
+
+use super::args::ValidateArgs;
+use crate::calibrate::shear::{SAMPLE, SERVO, ShearCell};
+use crate::report::Part;
+use crate::report::chart::{Chart, Kind, Series};
+use anyhow::Context;
+use grains_dem::space::{D2, Space};
+use grains_oracle::band;
+use std::collections::HashMap;
+use std::fmt::Write as _;
+
+mod continuum;
+mod training;
+
+/// The scene whose grains the planar shear uses (Chen's Table 1).
+const SCENE: &str = "column_collapse_2d.toml";
+/// Chen's Table 3: width and height in D50, grain count, and its 400 kPa over a 1-cm-thick
+/// disk as a stress over a unit-thick one [Pa].
+const WIDTH_D: f64 = 60.0;
+const GRAINS: usize = 7640;
+const PRESSURE: f64 = 4.0e3;
+/// The band's inertial number the top's speed is set for, V = I √(P / ρ) / d × 22 D50: Chen's
+/// 2 cm/s is I ≈ 7e-5 in its 22-D50 band; 5e-4 is still quasi-static (below 1e-3) and takes
+/// 2.4 s of shear instead of 17 s at this pressure.
+const BAND_INERTIAL: f64 = 5e-4;
+/// The paper's band: 22 D50 for its DEM and its hybrid (Fig. 11), measured as the strain grows
+/// from 37% to 57% (the top's travel over the specimen's width).
+const PAPER_BAND: f64 = 22.0;
+const WINDOW: (f64, f64) = (0.37, 0.57);
+/// t_s within this many D50 of the paper's: App. A's rule reads a synthetic band 0.2–2 D50
+/// thin (`grains_oracle::band`'s test), the packings differ, and the literature's bands span
+/// 10–30 D50.
+const BAND_TOLERANCE: f64 = 4.0;
+/// The DEM planar shear's samples, and the thickness of the layers of grains glued to the
+/// floor and to the plate [D50].
+const SEEDS: [u64; 2] = [1, 2];
+const GLUE_D: f64 = 3.0;
+
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
+    let mut md = String::from("## Shear bands (Chen 2021)\n\n");
+    let dem = planar_shear(args, &mut part, &mut md)?;
+    // The DEM's results stand if the continuum cannot run.
+    if let Err(e) = continuum::continuum_planar_shear(args, &dem, &mut part, &mut md) {
+        tracing::error!("validate shear: the continuum planar shear failed: {e:#}");
+        let _ = writeln!(md, "### §6.1: planar shear, continuum\n\nDid not finish: {e:#}\n");
+        part.check(
+            "planar shear (continuum) ran to its end",
+            "every run completes",
+            format!("{e:#}"),
+            "no error",
+            false,
+        );
+    }
+    part.md = md;
+    Ok(part)
+}
+
+/// What the DEM planar shear hands the continuum's: the specimen, its packing, the band.
+struct DemShear {
+    /// Period and height after consolidation [m], mean grain diameter [m].
+    width: f64,
+    height: f64,
+    diameter: f64,
+    /// Packing fraction of the consolidated sample (middle half).
+    packing: f64,
+    /// The top's speed [m/s].
+    speed: f64,
+    /// The slab profile's width at half its peak [D50], and App. A's t_s [D50].
+    fwhm: f64,
+    t_s: f64,
+    /// The incremental strain profile (strain, height in D50).
+    profile: Vec<(f64, f64)>,
+    /// The consolidated sample before the shear, the DEM step [s], τ/σ_yy and the cell's
+    /// stress [σxx, σyy, σxy] (compression positive) against strain.
+    initial: grains_dem::DemState<D2>,
+    dt: f64,
+    curve: Vec<(f64, f64)>,
+    stresses: Vec<(f64, [f64; 3])>,
+}
+
+/// Sample grains' positions by id, x unwrapped against `reference` (the period is `width`).
+fn positions(cell: &ShearCell, reference: Option<&HashMap<u64, [f64; 2]>>) -> HashMap<u64, [f64; 2]> {
+    let g = &cell.state.grains;
+    (0..g.len())
+        .filter(|&i| g.id[i] >= SAMPLE)
+        .map(|i| {
+            let x = D2::to_array(g.x[i]);
+            let mut p = [x[0], x[1]];
+            if let Some(r) = reference.and_then(|r| r.get(&g.id[i])) {
+                p[0] = r[0] + (p[0] - r[0] + 0.5 * cell.width).rem_euclid(cell.width) - 0.5 * cell.width;
+            }
+            (g.id[i], p)
+        })
+        .collect()
+}
+
+/// One DEM planar shear: everything the report and the continuum take from it.
+struct DemRun {
+    seed: u64,
+    width: f64,
+    height: f64,
+    packing: f64,
+    speed: f64,
+    initial: grains_dem::DemState<D2>,
+    dt: f64,
+    curve: Vec<(f64, f64)>,
+    stresses: Vec<(f64, [f64; 3])>,
+    /// App. A's band: thickness [D50], the threshold, the grains' boxed positions, the band.
+    t_s: f64,
+    threshold: f64,
+    x_box: Vec<[f64; 2]>,
+    found: band::Band,
+    centre: f64,
+    profile: Vec<(f64, f64)>,
+    fwhm: f64,
+    /// Softening: the peak of τ/σ and its strain, the mean over the window.
+    peak: (f64, f64),
+    residual: f64,
+    wall: f64,
+}
+
+/// The planar shear of seed `seed`: consolidated with μ = 0.01, glued boundaries, sheared
+/// with the material's μ; its band by App. A over the window.
+fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> anyhow::Result<DemRun> {
+    let t0 = std::time::Instant::now();
+    let dem = scene.materials[material].dem.as_ref().context("a DEM material")?;
+    let (mu, d) = (dem.friction, 2.0 * dem.radius);
+    // Columns of the cell's lattice for Chen's width.
+    let cols = (WIDTH_D * d / ShearCell::spacing(dem)).round() as usize;
+    let mut cell = ShearCell::new(scene, material, GRAINS, cols, PRESSURE, seed, 2)?;
+    cell.state.params.materials[0].friction = 0.01;
+    cell.consolidate().context("consolidating the planar shear at mu = 0.01")?;
+    cell.state.params.materials[0].friction = mu;
+    cell.glue(GLUE_D * d);
+    // The discrete version of the initial system, which kinematic training starts from.
+    let initial = cell.state.clone();
+    let packing = cell.packing();
+    let height = cell.plate_y();
+    let speed = cell.rate_of(BAND_INERTIAL) * PAPER_BAND * d;
+    tracing::info!(
+        "validate shear: seed {seed}: {GRAINS} grains, {:.1} x {:.1} D50, packing {packing:.3}, top at {:.2} mm/s",
+        cell.width / d,
+        height / d,
+        1e3 * speed
+    );
+    // Shear: the top at `speed`, its height a servo on σ_yy; every SERVO steps the stress.
+    let steps = (WINDOW.1 * cell.width / speed / cell.dt).ceil() as usize;
+    let mut curve: Vec<(f64, f64)> = Vec::new();
+    let mut stresses: Vec<(f64, [f64; 3])> = Vec::new();
+    let mut reference = None;
+    let mut s = [PRESSURE, PRESSURE, 0.0];
+    let mut step = 0;
+    while step < steps {
+        if grains_service::signals::signalled() {
+            anyhow::bail!("stopped by a signal");
+        }
+        let strain = speed * cell.dt * step as f64 / cell.width;
+        if reference.is_none() && strain >= WINDOW.0 {
+            reference = Some(positions(&cell, None));
+        }
+        cell.servo(s[1], speed, 0.0);
+        s = cell.run(SERVO);
+        if let Some(id) = grains_dem::pipeline::DemPipeline::first_non_finite(&cell.state) {
+            anyhow::bail!("grain {id} is not finite: the planar shear blew up at strain {strain:.3}");
+        }
+        step += SERVO;
+        let strain = speed * cell.dt * step as f64 / cell.width;
+        curve.push((strain, s[2].abs() / s[1]));
+        stresses.push((strain, s));
+        if step % (50 * SERVO) == 0 {
+            tracing::info!(
+                "validate shear: seed {seed}: strain {strain:.3}, tau/sigma {:.3}",
+                s[2].abs() / s[1]
+            );
+        }
+    }
+    let from = reference.context("the shear reached the window's start")?;
+    let to = positions(&cell, Some(&from));
+    let ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
+    let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
+    let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
+    let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
+    let threshold = band::percentile(&strain, 0.98);
+    // Boxed where the grains are at the window's start, x in the period (a band along x).
+    let x_box: Vec<[f64; 2]> = x0.iter().map(|p| [p[0].rem_euclid(cell.width), p[1]]).collect();
+    let found = band::measure(&x_box, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
+    let centre = found.grains.iter().map(|&i| x0[i][1]).sum::<f64>() / found.grains.len() as f64 / d;
+
+    // Softening: the peak of τ/σ (running mean over 0.05 of strain) against its mean over
+    // the window.
+    let per = curve.len().div_ceil(curve.last().map_or(1.0, |c| c.0 / 0.05) as usize).max(1);
+    let smooth: Vec<(f64, f64)> = curve
+        .chunks(per)
+        .map(|c| {
+            (
+                c.iter().map(|p| p.0).sum::<f64>() / c.len() as f64,
+                c.iter().map(|p| p.1).sum::<f64>() / c.len() as f64,
+            )
+        })
+        .collect();
+    let peak = smooth.iter().copied().fold((0.0, 0.0), |b, p| if p.1 > b.1 { p } else { b });
+    let late: Vec<f64> = curve.iter().filter(|p| p.0 >= WINDOW.0).map(|p| p.1).collect();
+    let residual = late.iter().sum::<f64>() / late.len().max(1) as f64;
+
+    // The incremental strain's profile, by height at the window's start.
+    let profile = slab_profile(x0.iter().zip(&strain).map(|(p, &e)| (p[1], e)), height, d);
+    let fwhm = half_peak_width(&profile, SLAB_D);
+    Ok(DemRun {
+        seed,
+        width: cell.width,
+        height,
+        packing,
+        speed,
+        initial,
+        dt: cell.dt,
+        curve,
+        stresses,
+        t_s: found.thickness / d,
+        threshold,
+        x_box,
+        found,
+        centre,
+        profile,
+        fwhm,
+        peak,
+        residual,
+        wall: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Chen 2021 §6.1 as a DEM, one run per seed of [`SEEDS`]: the band's thickness (their mean
+/// against the paper's), direction and softening; the first seed's run is the one the
+/// continuum and the training take.
+fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<DemShear> {
+    let path = args.scenes.join(SCENE);
+    let scene = grains_protocol::scene::load(&path).with_context(|| format!("loading {}", path.display()))?;
+    let material = scene.bodies[0].material;
+    let dem = scene.materials[material].dem.as_ref().context("a DEM material")?;
+    let (mu, d) = (dem.friction, 2.0 * dem.radius);
+    let runs: Vec<DemRun> = SEEDS
+        .iter()
+        .map(|&seed| dem_run(&scene, material, seed))
+        .collect::<anyhow::Result<_>>()?;
+    let first = &runs[0];
+    let _ = writeln!(
+        md,
+        "### §6.1: planar shear, DEM\n\nChen 2021 Table 3 in D50: {GRAINS} grains of `{SCENE}` (Chen's Table 1), \
+         {:.1} D50 wide (periodic), {:.1} D50 high after consolidation at σ_yy = {:.0} Pa with μ = 0.01, then sheared with \
+         μ = {mu}: the top row at {:.2} mm/s (I ≈ {BAND_INERTIAL:.0e} in a 22-D50 band), σ_yy held by its servo. The grains \
+         within {GLUE_D} D50 of the floor row and of the plate row are glued to them: boundaries as rough as the packing \
+         (with one row of grains for a wall the band formed along the floor in one of three runs, 2.6 D50 up, 6.0 D50 \
+         thick). The strain is the top's travel over the width, as Chen's. Band (App. A): Cundall's best-fit strain of \
+         each grain over its neighbours within 1.5 D50 from strain {} to {}, the grains above its 98th percentile, 2σ \
+         outliers out, the minimum-area box. One run per seed (the samples differ in their lattice's jitter and radii).\n\n\
+         | seed | packing (middle half) | t_s (App. A) | band centre | direction | slab profile at half peak | grains in the measure | peak τ/σ_yy (strain) | mean τ/σ_yy over the window | wall |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        first.width / d,
+        first.height / d,
+        PRESSURE,
+        1e3 * first.speed,
+        WINDOW.0,
+        WINDOW.1,
+    );
+    for r in &runs {
+        let _ = writeln!(
+            md,
+            "| {} | {:.3} | {:.1} D50 | {:.1} D50 | {:.1}° | {:.0} D50 | {} | {:.3} ({:.2}) | {:.3} | {:.0} s |",
+            r.seed,
+            r.packing,
+            r.t_s,
+            r.centre,
+            r.found.angle.to_degrees(),
+            r.fwhm,
+            r.found.grains.len(),
+            r.peak.1,
+            r.peak.0,
+            r.residual,
+            r.wall
+        );
+    }
+    let t_s = runs.iter().map(|r| r.t_s).sum::<f64>() / runs.len() as f64;
+    let _ = writeln!(md, "\nPaper: t_s = {PAPER_BAND} D50 in the middle of the specimen (Fig. 11).\n");
+    part.check(
+        "planar shear (DEM): band thickness",
+        format!("Chen 2021 Fig. 11: {PAPER_BAND} D50 (DEM and hybrid)"),
+        format!(
+            "{t_s:.1} D50, the mean of {} seeds ({})",
+            runs.len(),
+            runs.iter().map(|r| format!("{:.1}", r.t_s)).collect::<Vec<_>>().join(", ")
+        ),
+        format!("±{BAND_TOLERANCE} D50"),
+        (t_s - PAPER_BAND).abs() <= BAND_TOLERANCE,
+    );
+    let angles: Vec<f64> = runs.iter().map(|r| r.found.angle.to_degrees()).collect();
+    part.check(
+        "planar shear (DEM): the band runs along the shear",
+        "Chen 2021 Fig. 11: a horizontal band",
+        angles.iter().map(|a| format!("{a:.1}°")).collect::<Vec<_>>().join(", "),
+        "within 10° on every seed",
+        angles.iter().all(|a| a.abs() <= 10.0),
+    );
+    part.check(
+        "planar shear (DEM): softening",
+        "Chen 2021 Fig. 10: the shear stress peaks, then softens as the band forms",
+        runs.iter()
+            .map(|r| format!("peak τ/σ {:.3} at strain {:.2}, window mean {:.3}", r.peak.1, r.peak.0, r.residual))
+            .collect::<Vec<_>>()
+            .join("; "),
+        "peak above the window's mean on every seed",
+        runs.iter().all(|r| r.peak.1 > r.residual),
+    );
+    let stress = Chart {
+        title: "Planar shear (DEM): shear over normal stress against strain".into(),
+        x_label: "strain (top travel / width)".into(),
+        y_label: "tau_xy / sigma_yy".into(),
+        series: runs
+            .iter()
+            .map(|r| Series::new(format!("DEM, seed {}", r.seed), Kind::Line, r.curve.clone()))
+            .collect(),
+        ..Chart::default()
+    };
+    part.chart(
+        &args.out,
+        "shear_planar_stress",
+        "Planar shear (DEM): τ/σ_yy against strain",
+        &stress,
+    )?;
+    let mut series: Vec<Series> = runs
+        .iter()
+        .map(|r| Series::new(format!("DEM, seed {}", r.seed), Kind::LinePoints, r.profile.clone()))
+        .collect();
+    series.push(Series::new(
+        "98th percentile, seed 1",
+        Kind::Dashed,
+        vec![(first.threshold, 0.0), (first.threshold, first.height / d)],
+    ));
+    let profile_chart = Chart {
+        title: format!(
+            "Planar shear (DEM): incremental strain {}-{} across the specimen",
+            WINDOW.0, WINDOW.1
+        ),
+        x_label: "mean deviatoric best-fit strain of a 2-D50 slab".into(),
+        y_label: "height [D50]".into(),
+        series,
+        ..Chart::default()
+    };
+    part.chart(
+        &args.out,
+        "shear_planar_profile",
+        "Planar shear (DEM): where the band is",
+        &profile_chart,
+    )?;
+    let hot: Vec<(f64, f64)> = first
+        .found
+        .grains
+        .iter()
+        .map(|&i| (first.x_box[i][0] / d, first.x_box[i][1] / d))
+        .collect();
+    let all: Vec<(f64, f64)> = first.x_box.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
+    let grains_chart = Chart {
+        title: format!("Planar shear (DEM, seed {}): the band's grains (App. A)", first.seed),
+        x_label: "x [D50]".into(),
+        y_label: "y [D50]".into(),
+        series: vec![
+            Series::new("a quarter of the grains", Kind::Points, all),
+            Series::new("band grains", Kind::Points, hot),
+        ],
+        ..Chart::default()
+    };
+    part.chart(
+        &args.out,
+        "shear_planar_band",
+        "Planar shear (DEM): the grains App. A counts in the band",
+        &grains_chart,
+    )?;
+    let first = runs.into_iter().next().context("no DEM run")?;
+    Ok(DemShear {
+        width: first.width,
+        height: first.height,
+        diameter: d,
+        packing: first.packing,
+        speed: first.speed,
+        fwhm: first.fwhm,
+        t_s: first.t_s,
+        profile: first.profile,
+        initial: first.initial,
+        dt: first.dt,
+        curve: first.curve,
+        stresses: first.stresses,
+    })
+}
+
+/// Slabs of the strain profiles [D50].
+const SLAB_D: f64 = 2.0;
+
+/// The mean of a value over horizontal slabs SLAB_D grains thick from the floor up to `height`
+/// (and a little above, for dilation), from (height, value) samples: (mean, slab centre in
+/// D50) for every slab holding a sample.
+fn slab_profile(samples: impl Iterator<Item = (f64, f64)>, height: f64, d: f64) -> Vec<(f64, f64)> {
+    let slab = SLAB_D * d;
+    let mut bins: Vec<(f64, usize)> = vec![(0.0, 0); (height / slab).ceil() as usize + 4];
+    for (y, v) in samples {
+        let k = ((y / slab).floor().max(0.0) as usize).min(bins.len() - 1);
+        bins[k].0 += v;
+        bins[k].1 += 1;
+    }
+    bins.iter()
+        .enumerate()
+        .filter(|(_, b)| b.1 > 0)
+        .map(|(k, b)| (b.0 / b.1 as f64, (k as f64 + 0.5) * SLAB_D))
+        .collect()
+}
+
+/// The width of a profile (value, height) at half its peak, in the profile's height unit: the
+/// slabs (each `slab` thick) around the peak down to half of it.
+fn half_peak_width(profile: &[(f64, f64)], slab: f64) -> f64 {
+    if profile.is_empty() {
+        return 0.0;
+    }
+    let top = (0..profile.len()).fold(0, |b, k| if profile[k].0 > profile[b].0 { k } else { b });
+    let half = 0.5 * profile[top].0;
+    let lo = (0..=top).rev().take_while(|&k| profile[k].0 >= half).last().unwrap_or(top);
+    let hi = (top..profile.len()).take_while(|&k| profile[k].0 >= half).last().unwrap_or(top);
+    profile[hi].1 - profile[lo].1 + slab
+}
