@@ -433,7 +433,7 @@ impl<'a> Epoch<'a> {
             }
             let mass = self.grain_mass[c] / xs.len() as f64;
             for x in xs {
-                let (v, stress) = interpolate_grains::<S>(self.input.nodes, self.input.kernel, x, &node_mp, &stress);
+                let (v, stress) = interpolate::<S>(self.input.nodes, self.input.kernel, x, &node_mp, &stress);
                 new_points.push(NewPoint {
                     id: next_point_id + new_points.len() as u64,
                     x,
@@ -449,19 +449,8 @@ impl<'a> Epoch<'a> {
 
     /// The grains' mass and momentum on the nodes (the MPM's kernel), for their velocity there.
     fn grain_momentum_on_nodes<S: Space>(&self) -> BTreeMap<u64, (f64, [f64; 3])> {
-        let mut node_mp: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
-        for g in self.input.grains.iter().filter(|g| !g.fixed) {
-            for_each_node::<S>(self.input.nodes, self.input.kernel, S::from_array(g.x), |node, w, _| {
-                if w > 0.0 {
-                    let e = node_mp.entry(node).or_default();
-                    e.0 += w * g.mass;
-                    for k in 0..3 {
-                        e.1[k] += w * g.mass * g.v[k];
-                    }
-                }
-            });
-        }
-        node_mp
+        let grains = self.input.grains.iter().filter(|g| !g.fixed);
+        momentum_on_nodes::<S>(self.input.nodes, self.input.kernel, grains.map(|g| (g.x, g.mass, g.v)))
     }
 
     /// The grains' stress per node (the input), rescaled to the part of the node's support the
@@ -591,10 +580,32 @@ impl<'a> Epoch<'a> {
     }
 }
 
-/// Interpolates the grains' velocity (from their mass and momentum per node) and stress per
-/// node to `x` with the MPM's kernel, each renormalized over the nodes that have a value: a
-/// point at the edge of the grains reads their values, not zeros from empty nodes.
-fn interpolate_grains<S: Space>(
+/// The mass and momentum of `items` (position, mass, velocity) on the nodes, with the MPM's
+/// kernel.
+pub(crate) fn momentum_on_nodes<S: Space>(
+    nodes: &Grid,
+    kernel: Kernel,
+    items: impl IntoIterator<Item = ([f64; 3], f64, [f64; 3])>,
+) -> BTreeMap<u64, (f64, [f64; 3])> {
+    let mut node_mp: BTreeMap<u64, (f64, [f64; 3])> = BTreeMap::new();
+    for (x, m, v) in items {
+        for_each_node::<S>(nodes, kernel, S::from_array(x), |node, w, _| {
+            if w > 0.0 {
+                let e = node_mp.entry(node).or_default();
+                e.0 += w * m;
+                for (p, vk) in e.1.iter_mut().zip(v) {
+                    *p += w * m * vk;
+                }
+            }
+        });
+    }
+    node_mp
+}
+
+/// Interpolates a velocity (from mass and momentum per node) and a stress per node to `x`
+/// with the MPM's kernel, each renormalized over the nodes that have a value: a point at the
+/// edge of the material reads its values, not zeros from empty nodes.
+pub(crate) fn interpolate<S: Space>(
     nodes: &Grid,
     kernel: Kernel,
     x: [f64; 3],
@@ -631,7 +642,7 @@ fn interpolate_grains<S: Space>(
 /// shows in the epoch's mass before and after). New points take their cell's factor
 /// directly; the existing ones are listed in `plan.scale_points`, what is lost in
 /// `plan.unplaced`.
-fn conserve_mass(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &mut Plan) {
+pub(crate) fn conserve_mass(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &mut Plan) {
     let cells = input.cells;
     let gone_p: BTreeSet<u64> = plan.delete_points.iter().copied().collect();
     let ledger = Ledger::of(input, dim, s, plan, &gone_p);
@@ -800,7 +811,7 @@ fn ring(n: [usize; 3], dim: usize, c: usize, r: i64) -> impl Iterator<Item = usi
 }
 
 /// Area of a disk (2D, per metre of thickness) or volume of a sphere (3D) of radius `r`.
-fn grain_volume(dim: usize, r: f64) -> f64 {
+pub(crate) fn grain_volume(dim: usize, r: f64) -> f64 {
     if dim == 2 {
         std::f64::consts::PI * r * r
     } else {
@@ -808,7 +819,7 @@ fn grain_volume(dim: usize, r: f64) -> f64 {
     }
 }
 
-fn cell_corner(cells: &Grid, n: [usize; 3], c: usize) -> [f64; 3] {
+pub(crate) fn cell_corner(cells: &Grid, n: [usize; 3], c: usize) -> [f64; 3] {
     let ijk = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
     [0, 1, 2].map(|k| cells.origin[k] + ijk[k] as f64 * cells.h)
 }
@@ -848,17 +859,17 @@ fn poisson_in_cell(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use grains_grid::D2;
 
-    const R: f64 = 0.5e-3;
-    const H: f64 = 0.002;
-    const W: f64 = 0.5;
+    pub(crate) const R: f64 = 0.5e-3;
+    pub(crate) const H: f64 = 0.002;
+    pub(crate) const W: f64 = 0.5;
     const V0: [f64; 3] = [0.3, -0.1, 0.0];
 
     /// The MPM grid over [0, 48] × [0, 32] mm and its cells.
-    fn grids() -> (Grid, Grid) {
+    pub(crate) fn grids() -> (Grid, Grid) {
         let nodes = Grid::covering([0.0; 3], [0.048, 0.032, 0.0], H, 2);
         let cells = Grid {
             nodes: [nodes.nodes[0] - 1, nodes.nodes[1] - 1, 1],
@@ -867,7 +878,7 @@ mod tests {
         (nodes, cells)
     }
 
-    fn settings() -> Settings {
+    pub(crate) fn settings() -> Settings {
         Settings {
             critical_packing: 0.5,
             layered: None,
@@ -972,7 +983,7 @@ mod tests {
 
     /// Material points on a square lattice of spacing H / 2 from the origin, `columns` × `rows`
     /// (packing 0.82 of density 2500), with the velocity `v` of their position.
-    fn block_of_points(columns: usize, rows: usize, v: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<Point> {
+    pub(crate) fn block_of_points(columns: usize, rows: usize, v: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<Point> {
         let sp = 0.5 * H;
         (0..rows)
             .flat_map(|j| (0..columns).map(move |i| [0.5 * sp + i as f64 * sp, 0.5 * sp + j as f64 * sp, 0.0]))
@@ -987,7 +998,7 @@ mod tests {
             .collect()
     }
 
-    fn disk_mass(r: f64) -> f64 {
+    pub(crate) fn disk_mass(r: f64) -> f64 {
         2500.0 * std::f64::consts::PI * r * r
     }
 
@@ -1020,7 +1031,7 @@ mod tests {
     /// Σ mass and momentum as the solvers weigh them in `zones` (grains 1 − w, points w in
     /// hybrid cells), new grains with the mass of their disk.
     /// `strict`: every item must be in a zone that has its model (after an epoch).
-    fn totals(cells: &Grid, zones: &[Zone], grains: &[Grain], points: &[Point], strict: bool) -> (f64, [f64; 3]) {
+    pub(crate) fn totals(cells: &Grid, zones: &[Zone], grains: &[Grain], points: &[Point], strict: bool) -> (f64, [f64; 3]) {
         let zone = |x| cell_of(cells, 2, x).map_or(Zone::Discrete, |c| zones[c]);
         let (mut m, mut p) = (0.0, [0.0; 3]);
         let items = grains
@@ -1041,7 +1052,7 @@ mod tests {
 
     /// Applies a plan: deletes, creates (points at their mass, grains at their disk's),
     /// scales points, and gives every item the share of its cell's new zone.
-    fn apply(cells: &Grid, plan: &Plan, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
+    pub(crate) fn apply(cells: &Grid, plan: &Plan, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
         grains.retain(|g| !plan.delete_grains.contains(&g.id));
         points.retain(|p| !plan.delete_points.contains(&p.id));
         grains.extend(plan.new_grains.iter().map(|g| Grain {

@@ -11,11 +11,13 @@
 //! - [`epoch`]: one epoch of the oracle: new zones, and the grains and points to delete and
 //!   create (Alg. 8, 17, 18);
 //! - [`shear_band`]: where a continuum shear band has formed (Chen 2021 §3, Alg. 1);
-//! - [`band`]: the thickness of a band of grains or points (Chen 2021 App. A).
+//! - [`band`]: the thickness of a band of grains or points (Chen 2021 App. A);
+//! - [`band_epoch`]: one enrichment into a band: grains cut from a prepared packing (Chen 2021 §4).
 
 use grains_grid::Grid;
 
 pub mod band;
+pub mod band_epoch;
 pub mod enrichment;
 pub mod epoch;
 pub mod shear_band;
