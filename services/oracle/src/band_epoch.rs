@@ -11,7 +11,7 @@
 //! at the packing's own state; kinematic training (`grains_dem::training`) then takes them
 //! through the continuum's deformation.
 
-use crate::epoch::{Inputs, NewGrain, Plan, Settings, cell_corner, cell_of, conserve_mass, grain_volume, interpolate, momentum_on_nodes};
+use crate::epoch::{Inputs, NewGrain, Plan, cell_corner, cell_of, conserve_mass, grain_volume, interpolate, momentum_on_nodes};
 use crate::{Zone, dims};
 use grains_grid::Space;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -75,9 +75,16 @@ fn rank(z: Zone) -> u8 {
 /// change that makes the total momentum what it was: the interpolated velocities of grains
 /// that are heavier or lighter than the points they replace, and the mass moved a cell or
 /// two, would otherwise change it. Returns the plan (no new points; `distance` empty: the
-/// zones come from the band) and that velocity change. Of `s` it reads `weight` and
-/// `grain_density` only. New grains' ids count up from `next_grain_id`.
-pub fn enrich<S: Space>(input: &Inputs<'_>, s: &Settings, band: &[Zone], packing: &Packing, next_grain_id: u64) -> (Plan, [f64; 3]) {
+/// zones come from the band) and that velocity change. `weight` is the points' share w in a
+/// hybrid cell (the grains' 1 − w), `grain_density` the new grains' [kg/m³]. New grains' ids
+/// count up from `next_grain_id`.
+pub fn enrich<S: Space>(
+    input: &Inputs<'_>,
+    band: &[Zone],
+    packing: &Packing,
+    (weight, grain_density): (f64, f64),
+    next_grain_id: u64,
+) -> (Plan, [f64; 3]) {
     let (cells, dim) = (input.cells, S::DIM);
     let count: usize = dims(cells, dim).iter().product();
     assert_eq!(band.len(), count, "one band zone per cell");
@@ -126,8 +133,8 @@ pub fn enrich<S: Space>(input: &Inputs<'_>, s: &Settings, band: &[Zone], packing
         g.id = next_grain_id + i as u64;
         g.v = interpolate::<S>(input.nodes, input.kernel, g.x, &node_mp, &none).0;
     }
-    conserve_mass(input, dim, s, &mut plan);
-    let shift = keep_momentum(input, dim, s, &mut plan);
+    conserve_mass(input, dim, weight, grain_density, &mut plan);
+    let shift = keep_momentum(input, dim, (weight, grain_density), &mut plan);
     (plan, shift)
 }
 
@@ -191,11 +198,11 @@ fn cut(input: &Inputs<'_>, dim: usize, need: &BTreeSet<usize>, packing: &Packing
 /// The velocity change of every new grain that keeps the total momentum, as the solvers
 /// weigh it (grains 1 − w, points w in hybrid cells), what it was before `plan`; applied to
 /// `plan.new_grains` and returned (zero when there are none).
-fn keep_momentum(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &mut Plan) -> [f64; 3] {
+fn keep_momentum(input: &Inputs<'_>, dim: usize, (weight, grain_density): (f64, f64), plan: &mut Plan) -> [f64; 3] {
     let zones = &plan.zones;
     let at = |x: [f64; 3]| cell_of(input.cells, dim, x).map_or(Zone::Discrete, |c| zones[c]);
-    let grain_share = |x| if at(x) == Zone::Hybrid { 1.0 - s.weight } else { 1.0 };
-    let point_share = |x| if at(x) == Zone::Hybrid { s.weight } else { 1.0 };
+    let grain_share = |x| if at(x) == Zone::Hybrid { 1.0 - weight } else { 1.0 };
+    let point_share = |x| if at(x) == Zone::Hybrid { weight } else { 1.0 };
     let gone_g: BTreeSet<u64> = plan.delete_grains.iter().copied().collect();
     let gone_p: BTreeSet<u64> = plan.delete_points.iter().copied().collect();
     let factor: BTreeMap<u64, f64> = plan.scale_points.iter().copied().collect();
@@ -215,7 +222,7 @@ fn keep_momentum(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &mut Plan) 
     }
     let mut new_mass = 0.0;
     for g in &plan.new_grains {
-        let m = grain_share(g.x) * s.grain_density * grain_volume(dim, g.radius);
+        let m = grain_share(g.x) * grain_density * grain_volume(dim, g.radius);
         add(-m, g.v);
         new_mass += m;
     }
@@ -336,7 +343,13 @@ mod tests {
         let band = zones(&cells, 2, &flagged_rows(&cells, &[8]), 0.0045, H);
         let previous = vec![Zone::Continuum; count];
         let before = totals(&cells, &previous, &grains, &points, true);
-        let (plan, shift) = enrich::<D2>(&inputs(&nodes, &cells, &previous, &grains, &points), &s, &band, &packing, 100);
+        let (plan, shift) = enrich::<D2>(
+            &inputs(&nodes, &cells, &previous, &grains, &points),
+            &band,
+            &packing,
+            (s.weight, s.grain_density),
+            100,
+        );
         assert_eq!(plan.zones, band);
         let row_zone = |row: usize| band[row * cells.nodes[0] as usize];
         let rows: Vec<Zone> = (0..16).map(row_zone).collect();
@@ -384,7 +397,13 @@ mod tests {
         let previous = plan.zones.clone();
         let before = totals(&cells, &previous, &grains, &points, true);
         let band = zones(&cells, 2, &flagged_rows(&cells, &[8, 9]), 0.0045, H);
-        let (two, _) = enrich::<D2>(&inputs(&nodes, &cells, &previous, &grains, &points), &s, &band, &packing, 10_000);
+        let (two, _) = enrich::<D2>(
+            &inputs(&nodes, &cells, &previous, &grains, &points),
+            &band,
+            &packing,
+            (s.weight, s.grain_density),
+            10_000,
+        );
         assert!(!two.new_grains.is_empty());
         for g in &two.new_grains {
             let c = cell_of(&cells, 2, g.x).unwrap();

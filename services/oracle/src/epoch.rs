@@ -138,6 +138,61 @@ pub fn cell_of(cells: &Grid, dim: usize, x: [f64; 3]) -> Option<usize> {
     Some(linear(n, ijk))
 }
 
+/// Σ mass and momentum of `grains` and `points` as the solvers weigh them in `zones`: grains
+/// 1 − `weight` and points `weight` in hybrid cells, all of it elsewhere (off the grid counts
+/// as discrete).
+pub fn totals(cells: &Grid, dim: usize, zones: &[Zone], weight: f64, grains: &[Grain], points: &[Point]) -> (f64, [f64; 3]) {
+    let hybrid = |x| cell_of(cells, dim, x).is_some_and(|c| zones[c] == Zone::Hybrid);
+    let (mut m, mut p) = (0.0, [0.0; 3]);
+    let items = grains
+        .iter()
+        .filter(|g| !g.fixed)
+        .map(|g| (g.x, g.mass, g.v, 1.0 - weight))
+        .chain(points.iter().map(|q| (q.x, q.mass, q.v, weight)));
+    for (x, mass, v, hybrid_share) in items {
+        let share = if hybrid(x) { hybrid_share } else { 1.0 };
+        m += share * mass;
+        (0..3).for_each(|k| p[k] += share * mass * v[k]);
+    }
+    (m, p)
+}
+
+/// Applies a plan as the solvers do: deletes, creates (points at their mass, grains at their
+/// size's mass of `grain_density`), scales points, and gives every item the share of its
+/// cell's new zone (grains 1 − `weight`, points `weight` in hybrid cells).
+#[allow(clippy::too_many_arguments)]
+pub fn apply(cells: &Grid, dim: usize, plan: &Plan, weight: f64, grain_density: f64, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
+    let gone_g: BTreeSet<u64> = plan.delete_grains.iter().copied().collect();
+    let gone_p: BTreeSet<u64> = plan.delete_points.iter().copied().collect();
+    grains.retain(|g| !gone_g.contains(&g.id));
+    points.retain(|p| !gone_p.contains(&p.id));
+    grains.extend(plan.new_grains.iter().map(|g| Grain {
+        id: g.id,
+        x: g.x,
+        radius: g.radius,
+        mass: grain_density * grain_volume(dim, g.radius),
+        share: 1.0,
+        v: g.v,
+        fixed: false,
+    }));
+    let factor: BTreeMap<u64, f64> = plan.scale_points.iter().copied().collect();
+    for p in points.iter_mut() {
+        p.mass *= factor.get(&p.id).copied().unwrap_or(1.0);
+    }
+    points.extend(plan.new_points.iter().map(|p| Point {
+        id: p.id,
+        x: p.x,
+        mass: p.mass,
+        share: 1.0,
+        v: p.v,
+    }));
+    let hybrid = |x| cell_of(cells, dim, x).is_some_and(|c| plan.zones[c] == Zone::Hybrid);
+    grains
+        .iter_mut()
+        .for_each(|g| g.share = if hybrid(g.x) { 1.0 - weight } else { 1.0 });
+    points.iter_mut().for_each(|p| p.share = if hybrid(p.x) { weight } else { 1.0 });
+}
+
 /// What an epoch looks at.
 pub struct Inputs<'a> {
     /// The MPM grid (its kernel spreads the grains' momentum and stress) and its cells (one
@@ -181,7 +236,7 @@ pub fn plan<S: Space>(input: &Inputs<'_>, s: &Settings, (next_grain_id, next_poi
         scale_points: Vec::new(),
         unplaced: 0.0,
     };
-    conserve_mass(input, S::DIM, s, &mut plan);
+    conserve_mass(input, S::DIM, s.weight, s.grain_density, &mut plan);
     plan
 }
 
@@ -642,10 +697,10 @@ pub(crate) fn interpolate<S: Space>(
 /// shows in the epoch's mass before and after). New points take their cell's factor
 /// directly; the existing ones are listed in `plan.scale_points`, what is lost in
 /// `plan.unplaced`.
-pub(crate) fn conserve_mass(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &mut Plan) {
+pub(crate) fn conserve_mass(input: &Inputs<'_>, dim: usize, weight: f64, grain_density: f64, plan: &mut Plan) {
     let cells = input.cells;
     let gone_p: BTreeSet<u64> = plan.delete_points.iter().copied().collect();
-    let ledger = Ledger::of(input, dim, s, plan, &gone_p);
+    let ledger = Ledger::of(input, dim, (weight, grain_density), plan, &gone_p);
     let mut factor = ledger.cell_factors();
     ledger.spread_to_neighbours(&mut factor, dims(cells, dim), dim);
     plan.unplaced = ledger.spread_to_all(&mut factor);
@@ -678,14 +733,14 @@ struct Ledger {
 }
 
 impl Ledger {
-    /// The ledger of `plan` over the grains and points of `input` (`gone_p`: the ids of the
-    /// points it deletes).
-    fn of(input: &Inputs<'_>, dim: usize, s: &Settings, plan: &Plan, gone_p: &BTreeSet<u64>) -> Ledger {
+    /// The ledger of `plan` over the grains and points of `input` at the weight w and the
+    /// grains' density (`gone_p`: the ids of the points it deletes).
+    fn of(input: &Inputs<'_>, dim: usize, (weight, grain_density): (f64, f64), plan: &Plan, gone_p: &BTreeSet<u64>) -> Ledger {
         let (cells, zones) = (input.cells, &plan.zones);
         let count = zones.len();
         let gone_g: BTreeSet<u64> = plan.delete_grains.iter().copied().collect();
-        let grain_share = |z: Zone| if z == Zone::Hybrid { 1.0 - s.weight } else { 1.0 };
-        let point_share = |z: Zone| if z == Zone::Hybrid { s.weight } else { 1.0 };
+        let grain_share = |z: Zone| if z == Zone::Hybrid { 1.0 - weight } else { 1.0 };
+        let point_share = |z: Zone| if z == Zone::Hybrid { weight } else { 1.0 };
         let (mut before, mut after_g, mut after_p) = (vec![0.0; count], vec![0.0; count], vec![0.0; count]);
         let mut changed = vec![false; count];
         for g in input.grains.iter().filter(|g| !g.fixed) {
@@ -697,7 +752,7 @@ impl Ledger {
                 after_g[c] += grain_share(zones[c]) * g.mass;
             }
         }
-        let mass_of = |r: f64| s.grain_density * grain_volume(dim, r);
+        let mass_of = |r: f64| grain_density * grain_volume(dim, r);
         for g in &plan.new_grains {
             if let Some(c) = cell_of(cells, dim, g.x) {
                 after_g[c] += grain_share(zones[c]) * mass_of(g.radius);
@@ -1028,55 +1083,24 @@ pub(crate) mod tests {
         }
     }
 
-    /// Σ mass and momentum as the solvers weigh them in `zones` (grains 1 − w, points w in
-    /// hybrid cells), new grains with the mass of their disk.
-    /// `strict`: every item must be in a zone that has its model (after an epoch).
+    /// [`super::totals`] at the tests' weight W. `strict`: every item must be in a zone that
+    /// has its model (after an epoch).
     pub(crate) fn totals(cells: &Grid, zones: &[Zone], grains: &[Grain], points: &[Point], strict: bool) -> (f64, [f64; 3]) {
-        let zone = |x| cell_of(cells, 2, x).map_or(Zone::Discrete, |c| zones[c]);
-        let (mut m, mut p) = (0.0, [0.0; 3]);
-        let items = grains
-            .iter()
-            .map(|g| (g.x, g.mass, g.v, 1.0 - W, Zone::Continuum))
-            .chain(points.iter().map(|q| (q.x, q.mass, q.v, W, Zone::Discrete)));
-        for (x, mass, v, hybrid_share, absent) in items {
-            let share = match zone(x) {
-                Zone::Hybrid => hybrid_share,
-                z if strict && z == absent => panic!("an item left in a zone without its model at {x:?}"),
-                _ => 1.0,
-            };
-            m += share * mass;
-            (0..3).for_each(|k| p[k] += share * mass * v[k]);
+        if strict {
+            let zone = |x| cell_of(cells, 2, x).map_or(Zone::Discrete, |c| zones[c]);
+            if let Some(g) = grains.iter().find(|g| zone(g.x) == Zone::Continuum) {
+                panic!("a grain left in a continuum cell at {:?}", g.x);
+            }
+            if let Some(p) = points.iter().find(|p| zone(p.x) == Zone::Discrete) {
+                panic!("a point left in a discrete cell at {:?}", p.x);
+            }
         }
-        (m, p)
+        super::totals(cells, 2, zones, W, grains, points)
     }
 
-    /// Applies a plan: deletes, creates (points at their mass, grains at their disk's),
-    /// scales points, and gives every item the share of its cell's new zone.
+    /// [`super::apply`] at the tests' weight W and grain density.
     pub(crate) fn apply(cells: &Grid, plan: &Plan, grains: &mut Vec<Grain>, points: &mut Vec<Point>) {
-        grains.retain(|g| !plan.delete_grains.contains(&g.id));
-        points.retain(|p| !plan.delete_points.contains(&p.id));
-        grains.extend(plan.new_grains.iter().map(|g| Grain {
-            id: g.id,
-            x: g.x,
-            radius: g.radius,
-            mass: disk_mass(g.radius),
-            share: 1.0,
-            v: g.v,
-            fixed: false,
-        }));
-        for (id, f) in &plan.scale_points {
-            points.iter_mut().filter(|p| p.id == *id).for_each(|p| p.mass *= f);
-        }
-        points.extend(plan.new_points.iter().map(|p| Point {
-            id: p.id,
-            x: p.x,
-            mass: p.mass,
-            share: 1.0,
-            v: p.v,
-        }));
-        let hybrid = |x| cell_of(cells, 2, x).is_some_and(|c| plan.zones[c] == Zone::Hybrid);
-        grains.iter_mut().for_each(|g| g.share = if hybrid(g.x) { 1.0 - W } else { 1.0 });
-        points.iter_mut().for_each(|p| p.share = if hybrid(p.x) { W } else { 1.0 });
+        super::apply(cells, 2, plan, W, 2500.0, grains, points);
     }
 
     fn depth_of(cells: &Grid, c: usize, top: f64, right: f64) -> f64 {

@@ -1,6 +1,7 @@
 //! The continuum planar shear (Chen 2021 §6.1, Fig. 11 right) watched by the shear-band oracle.
 
-use super::training::training_report;
+use super::hybrid::{Coupled, HYBRID_CELL_D, HYBRID_TRANSFERS, hybrid_report};
+use super::training::{Training, enrich_and_train, training_report};
 use super::*;
 
 /// Continuum cells of the planar shear, in grain diameters: App. C's mesh dependence and
@@ -30,10 +31,36 @@ pub(super) struct ContinuumShear {
     pub(super) curve: Vec<(f64, f64)>,
     pub(super) wall: f64,
     /// Up to the detection: the mean velocity [vx, vy] of the points in each cell-high slab
-    /// (from y = 0) every ORACLE_EVERY steps, with the time since the shear began [s]; and at
-    /// the detection, the band's centre [m] and the continuum's mean σ_xy [Pa].
+    /// (from y = 0) every ORACLE_EVERY steps, with the time since the shear began [s].
     pub(super) history: Vec<(f64, Vec<[f64; 2]>)>,
-    pub(super) band: Option<(f64, f64)>,
+    /// The continuum as the oracle saw it at the detection, for the enrichment.
+    pub(super) at_detection: Option<Detection>,
+    /// A hybrid run's grains.
+    pub(super) hybrid: Option<HybridShear>,
+}
+
+/// The hybrid's band in the grains (App. A), the grains measured and the strays, its DEM
+/// substeps per step, the coupler's shared nodes summed over its steps and its largest
+/// momentum error of a step, and the enrichment and training at the detection.
+pub(super) struct HybridShear {
+    pub(super) band: anyhow::Result<(Measured, usize, usize)>,
+    pub(super) substeps: usize,
+    pub(super) shared: u64,
+    pub(super) steps: u64,
+    pub(super) momentum_error: f64,
+    pub(super) training: Training,
+}
+
+/// The continuum at the oracle's detection: the strain, the mean σ_xy [Pa], its grid (nodes,
+/// kernel) and cells, the cells flagged, and its points as the oracle sees them.
+pub(super) struct Detection {
+    pub(super) strain: f64,
+    pub(super) shear_stress: f64,
+    pub(super) nodes: grains_grid::Grid,
+    pub(super) kernel: grains_grid::Kernel,
+    pub(super) cells: grains_grid::Grid,
+    pub(super) flagged: Vec<bool>,
+    pub(super) points: Vec<grains_oracle::epoch::Point>,
 }
 
 /// Chen 2021 §6.1 as a continuum (its Fig. 11, right): the critical-state model calibrated on
@@ -63,7 +90,7 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dem: &DemShear, part: 
     };
     let runs: Vec<ContinuumShear> = CELLS_D
         .iter()
-        .map(|&c| continuum_run(dem, &model, scene.materials[material].density, c))
+        .map(|&c| continuum_run(dem, &model, scene.materials[material].density, c, None))
         .collect::<anyhow::Result<_>>()?;
 
     let d = dem.diameter;
@@ -111,6 +138,16 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dem: &DemShear, part: 
     }
     let _ = writeln!(md);
     training_report(dem, &runs, part, md);
+    let hybrids = HYBRID_TRANSFERS
+        .iter()
+        .map(|&(name, t)| {
+            (
+                name,
+                continuum_run(dem, &model, scene.materials[material].density, HYBRID_CELL_D, Some(t)),
+            )
+        })
+        .collect();
+    let hybrid_curves = hybrid_report(args, dem, hybrids, part, md)?;
     for r in &runs {
         let cells = r.cell / d;
         part.check(
@@ -178,7 +215,7 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dem: &DemShear, part: 
         &profiles,
     )?;
     let stress = Chart {
-        title: "Planar shear: shear over normal stress against strain, DEM and continuum".into(),
+        title: "Planar shear: shear over normal stress against strain, DEM, continuum and hybrid".into(),
         x_label: "strain (top travel / width)".into(),
         y_label: "tau_xy / sigma_yy".into(),
         series: std::iter::once(Series::new("DEM", Kind::Line, dem.curve.clone()))
@@ -186,24 +223,28 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dem: &DemShear, part: 
                 runs.iter()
                     .map(|r| Series::new(format!("continuum, {:.0}-D50 cells", r.cell / d), Kind::Line, r.curve.clone())),
             )
+            .chain(hybrid_curves.into_iter().map(|(name, c)| Series::new(name, Kind::Line, c)))
             .collect(),
         ..Chart::default()
     };
     part.chart(
         &args.out,
         "shear_planar_stress_continuum",
-        "Planar shear: τ/σ_yy against strain, the DEM and the continuum overlaid",
+        "Planar shear: τ/σ_yy against strain, the DEM, the continuum and the hybrid overlaid",
         &stress,
     )?;
     Ok(())
 }
 
-/// One continuum planar shear on cells of `cell_d` grain diameters.
+/// One continuum planar shear on cells of `cell_d` grain diameters; with `hybrid` (the
+/// grains' transfer back), the hybrid's: at the detection the band is enriched and trained,
+/// and the grains coupled from there on ([`Coupled`]).
 fn continuum_run(
     dem: &DemShear,
     model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
     grain_density: f64,
     cell_d: f64,
+    hybrid: Option<grains_dem::coupled::GrainTransfer>,
 ) -> anyhow::Result<ContinuumShear> {
     use grains_grid::{D2, Grid, Kernel};
     use grains_mpm::boundary::Contact;
@@ -285,7 +326,8 @@ fn continuum_run(
     let mut recent = RecentStrain::default();
     let mut persistence = Persistence::default();
     let mut detected = None;
-    let (mut history, mut band) = (Vec::new(), None);
+    let (mut history, mut at_detection) = (Vec::new(), None);
+    let (mut coupled, mut training): (Option<Coupled>, Option<Training>) = (None, None);
     // Settle under the load at rest, then shear.
     let settle = (0.05 / dt).ceil() as usize;
     // The top's speed ramps up over three shear-wave transits of the specimen: started at
@@ -303,6 +345,9 @@ fn continuum_run(
         let shearing = step >= settle;
         if strain >= WINDOW.1 {
             break;
+        }
+        if shearing && strain >= WINDOW.0 {
+            coupled.iter_mut().for_each(Coupled::open_window);
         }
         if shearing && reference.is_none() && strain >= WINDOW.0 {
             reference = Some(
@@ -340,8 +385,12 @@ fn continuum_run(
                 *v = D2::from_array([plate[0], plate[1], 0.0]);
             }
         });
+        let constrained = coupled.as_mut().map(|c| c.couple(&mut pipe, &params, dt)).transpose()?;
         pipe.phase2(&mut pts, &params, dt)
             .map_err(|e| anyhow::anyhow!("continuum planar shear: {e}"))?;
+        if let (Some(c), Some(v)) = (coupled.as_mut(), constrained) {
+            c.finish(&v, dt)?;
+        }
         if !shearing || !(step - settle).is_multiple_of(ORACLE_EVERY) {
             continue;
         }
@@ -391,7 +440,29 @@ fn continuum_run(
                 sxy += pts.tau[k].x_axis.y * pts.volume[k];
                 vol += pts.jacobian[k] * pts.volume[k];
             }
-            band = Some((0.5 * (lo + hi) * d, sxy / vol));
+            let detection = Detection {
+                strain,
+                shear_stress: sxy / vol,
+                nodes: params.grid,
+                kernel: params.kernel,
+                cells,
+                flagged: persistence.flagged().to_vec(),
+                points: (0..pts.len())
+                    .map(|k| grains_oracle::epoch::Point {
+                        id: pts.id[k],
+                        x: at(k),
+                        mass: pts.mass[k],
+                        share: 1.0,
+                        v: D2::to_array(pts.v[k]),
+                    })
+                    .collect(),
+            };
+            if let Some(transfer) = hybrid {
+                let enriched = enrich_and_train(dem, &detection, &history, h)?;
+                training = Some(enriched.training.clone());
+                coupled = Some(Coupled::new(enriched, &mut pts, &params, (cells, transfer), dt, dem.dt, w));
+            }
+            at_detection = Some(detection);
             tracing::info!(
                 "validate shear: continuum on {cell_d}-D50 cells: the oracle fires at strain {strain:.3}, cells {lo:.0}-{hi:.0} D50 high"
             );
@@ -422,7 +493,18 @@ fn continuum_run(
         curve,
         wall: t0.elapsed().as_secs_f64(),
         history,
-        band,
+        at_detection,
+        hybrid: match coupled {
+            Some(c) => Some(HybridShear {
+                band: c.band(d, height),
+                substeps: c.substeps,
+                shared: c.shared,
+                steps: c.steps,
+                momentum_error: c.momentum_error,
+                training: training.context("a hybrid run trains its band")?,
+            }),
+            None => None,
+        },
     })
 }
 

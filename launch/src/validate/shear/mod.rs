@@ -1,7 +1,8 @@
-//! `grains validate --part shear`: shear bands (Chen 2021). So far the planar shear of §6.1 as
-//! a DEM (the ground truth) and as a continuum watched by the shear-band oracle (Alg. 1), and
-//! kinematic training (§4.1.1) of the packing that would replace the continuum's band, against
-//! the DEM's stress (Fig. 13); the enrichment and the hybrid step are not built. The DEM planar shear of §6.1 (Table
+//! `grains validate --part shear`: shear bands (Chen 2021). The planar shear of §6.1 as a DEM
+//! (the ground truth), as a continuum watched by the shear-band oracle (Alg. 1), and as the
+//! hybrid: at the oracle's detection the band is enriched with grains of a prepared packing
+//! (§4), trained through the continuum's history (§4.1.1, Fig. 13: its stress against the
+//! DEM's) and coupled to the continuum (§5) to the end. The DEM planar shear of §6.1 (Table
 //! 3: 6 × 12 cm, 7,640 grains of Table 1, periodic along the shear, the bottom fixed, the top
 //! driven sideways under a constant normal stress), with the band measured by App. A's rule
 //! ([`grains_oracle::band`]): its thickness against the paper's 22 D50, the stress against
@@ -30,6 +31,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 
 mod continuum;
+mod hybrid;
 mod training;
 
 /// The scene whose grains the planar shear uses (Chen's Table 1).
@@ -97,22 +99,97 @@ struct DemShear {
     dt: f64,
     curve: Vec<(f64, f64)>,
     stresses: Vec<(f64, [f64; 3])>,
+    /// The band's centre [D50], the peak τ/σ_yy (strain, value), its mean over the window,
+    /// and the run's wall time [s].
+    centre: f64,
+    peak: (f64, f64),
+    residual: f64,
+    wall: f64,
 }
 
 /// Sample grains' positions by id, x unwrapped against `reference` (the period is `width`).
 fn positions(cell: &ShearCell, reference: Option<&HashMap<u64, [f64; 2]>>) -> HashMap<u64, [f64; 2]> {
-    let g = &cell.state.grains;
+    positions_of(&cell.state, cell.width, |id| id >= SAMPLE, reference)
+}
+
+/// The positions of the grains whose ids pass `take`, by id, x unwrapped against `reference`
+/// (the period is `width`).
+fn positions_of(
+    state: &grains_dem::DemState<D2>,
+    width: f64,
+    take: impl Fn(u64) -> bool,
+    reference: Option<&HashMap<u64, [f64; 2]>>,
+) -> HashMap<u64, [f64; 2]> {
+    let g = &state.grains;
     (0..g.len())
-        .filter(|&i| g.id[i] >= SAMPLE)
+        .filter(|&i| take(g.id[i]))
         .map(|i| {
             let x = D2::to_array(g.x[i]);
             let mut p = [x[0], x[1]];
             if let Some(r) = reference.and_then(|r| r.get(&g.id[i])) {
-                p[0] = r[0] + (p[0] - r[0] + 0.5 * cell.width).rem_euclid(cell.width) - 0.5 * cell.width;
+                p[0] = r[0] + (p[0] - r[0] + 0.5 * width).rem_euclid(width) - 0.5 * width;
             }
             (g.id[i], p)
         })
         .collect()
+}
+
+/// Softening of a τ/σ_yy curve (strain, value): its peak (strain, value; running mean over 0.05
+/// of strain) and its mean over the window.
+fn softening(curve: &[(f64, f64)]) -> ((f64, f64), f64) {
+    let per = curve.len().div_ceil(curve.last().map_or(1.0, |c| c.0 / 0.05) as usize).max(1);
+    let smooth: Vec<(f64, f64)> = curve
+        .chunks(per)
+        .map(|c| {
+            (
+                c.iter().map(|p| p.0).sum::<f64>() / c.len() as f64,
+                c.iter().map(|p| p.1).sum::<f64>() / c.len() as f64,
+            )
+        })
+        .collect();
+    let peak = smooth.iter().copied().fold((0.0, 0.0), |b, p| if p.1 > b.1 { p } else { b });
+    let late: Vec<f64> = curve.iter().filter(|p| p.0 >= WINDOW.0).map(|p| p.1).collect();
+    (peak, late.iter().sum::<f64>() / late.len().max(1) as f64)
+}
+
+/// A band in grains over the strain window, by App. A: thickness and centre [D50], the 98th
+/// percentile of the best-fit strain, the grains' positions boxed into the period, the band,
+/// and the incremental strain's slab profile with its half-peak width [D50].
+struct Measured {
+    t_s: f64,
+    centre: f64,
+    threshold: f64,
+    x_box: Vec<[f64; 2]>,
+    found: band::Band,
+    profile: Vec<(f64, f64)>,
+    fwhm: f64,
+}
+
+/// App. A on the grains that are in both `from` (the window's start) and `to` (its end),
+/// grains of diameter `d` in a cell `width` wide (periodic) and `height` high.
+fn band_of(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64, width: f64, height: f64) -> anyhow::Result<Measured> {
+    let mut ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
+    ids.sort_unstable();
+    let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
+    let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
+    let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
+    let threshold = band::percentile(&strain, 0.98);
+    // Boxed where the grains are at the window's start, x in the period (a band along x).
+    let x_box: Vec<[f64; 2]> = x0.iter().map(|p| [p[0].rem_euclid(width), p[1]]).collect();
+    let found = band::measure(&x_box, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
+    let centre = found.grains.iter().map(|&i| x0[i][1]).sum::<f64>() / found.grains.len() as f64 / d;
+    // The incremental strain's profile, by height at the window's start.
+    let profile = slab_profile(x0.iter().zip(&strain).map(|(p, &e)| (p[1], e)), height, d);
+    let fwhm = half_peak_width(&profile, SLAB_D);
+    Ok(Measured {
+        t_s: found.thickness / d,
+        centre,
+        threshold,
+        x_box,
+        found,
+        profile,
+        fwhm,
+    })
 }
 
 /// One DEM planar shear: everything the report and the continuum take from it.
@@ -197,35 +274,18 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) ->
     }
     let from = reference.context("the shear reached the window's start")?;
     let to = positions(&cell, Some(&from));
-    let ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
-    let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
-    let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
-    let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
-    let threshold = band::percentile(&strain, 0.98);
-    // Boxed where the grains are at the window's start, x in the period (a band along x).
-    let x_box: Vec<[f64; 2]> = x0.iter().map(|p| [p[0].rem_euclid(cell.width), p[1]]).collect();
-    let found = band::measure(&x_box, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
-    let centre = found.grains.iter().map(|&i| x0[i][1]).sum::<f64>() / found.grains.len() as f64 / d;
+    let Measured {
+        t_s,
+        centre,
+        threshold,
+        x_box,
+        found,
+        profile,
+        fwhm,
+    } = band_of(&from, &to, d, cell.width, height)?;
 
-    // Softening: the peak of τ/σ (running mean over 0.05 of strain) against its mean over
-    // the window.
-    let per = curve.len().div_ceil(curve.last().map_or(1.0, |c| c.0 / 0.05) as usize).max(1);
-    let smooth: Vec<(f64, f64)> = curve
-        .chunks(per)
-        .map(|c| {
-            (
-                c.iter().map(|p| p.0).sum::<f64>() / c.len() as f64,
-                c.iter().map(|p| p.1).sum::<f64>() / c.len() as f64,
-            )
-        })
-        .collect();
-    let peak = smooth.iter().copied().fold((0.0, 0.0), |b, p| if p.1 > b.1 { p } else { b });
-    let late: Vec<f64> = curve.iter().filter(|p| p.0 >= WINDOW.0).map(|p| p.1).collect();
-    let residual = late.iter().sum::<f64>() / late.len().max(1) as f64;
+    let (peak, residual) = softening(&curve);
 
-    // The incremental strain's profile, by height at the window's start.
-    let profile = slab_profile(x0.iter().zip(&strain).map(|(p, &e)| (p[1], e)), height, d);
-    let fwhm = half_peak_width(&profile, SLAB_D);
     Ok(DemRun {
         seed,
         width: cell.width,
@@ -236,7 +296,7 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) ->
         dt: cell.dt,
         curve,
         stresses,
-        t_s: found.thickness / d,
+        t_s,
         threshold,
         x_box,
         found,
@@ -408,6 +468,10 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         dt: first.dt,
         curve: first.curve,
         stresses: first.stresses,
+        centre: first.centre,
+        peak: first.peak,
+        residual: first.residual,
+        wall: first.wall,
     })
 }
 

@@ -1,7 +1,7 @@
 //! Kinematic training (Chen 2021 §4.1.1, Fig. 13) of the packing that would replace the
 //! continuum's band, against the DEM's stress.
 
-use super::continuum::{ContinuumShear, ORACLE_EVERY};
+use super::continuum::{ContinuumShear, Detection, ORACLE_EVERY};
 use super::*;
 
 /// Chen's enrichment distance φ0 (Table 4: 2.2 cm in 1-mm grains) [D50]: the discrete zone
@@ -12,12 +12,27 @@ const PHI0_D: f64 = 22.0;
 /// untrained one off by more than `UNTRAINED_OFF` (Chen: 95%).
 const TRAINED_WITHIN: f64 = 0.2;
 const UNTRAINED_OFF: f64 = 0.5;
+/// The points' share w of a hybrid cell's mass (the scenes' default `coupling.weight`).
+pub(super) const WEIGHT: f64 = 0.5;
+
+/// What the enrichment at the detection did: grains cut, points deleted, and the changes of
+/// the total mass (relative) and momentum (over the total mass × the top's speed), and the
+/// new grains' velocity change that keeps the momentum (over the top's speed).
+#[derive(Clone)]
+pub(super) struct Enrichment {
+    grains: usize,
+    deleted: usize,
+    mass: f64,
+    momentum: f64,
+    shift: f64,
+}
 
 /// What kinematic training of the band's packing gave.
-struct Training {
-    /// The slab [D50], its grains, the strain trained to.
-    slab: (f64, f64),
-    grains: usize,
+#[derive(Clone)]
+pub(super) struct Training {
+    /// The region enriched [D50], the enrichment, the strain trained to.
+    pub(super) slab: (f64, f64),
+    enrichment: Enrichment,
     strain: f64,
     /// σ_xy [Pa] (magnitudes): the continuum's at the detection, the full DEM's at that strain.
     continuum: f64,
@@ -28,37 +43,97 @@ struct Training {
     wall: f64,
 }
 
-/// Chen 2021 §4.1.1 and Fig. 13 on the planar shear: the packing that would replace the
-/// continuum's band is cut from the consolidated DEM sample (the slab φ0 either side of the
-/// band's centre at the detection), and driven by its boundary (the grains within one D50 of
-/// the slab's faces) with the continuum's velocity there, from the start of the shear to the
-/// oracle's detection. Its stress against the full DEM's at the same strain.
+/// Chen 2021 §4 and Fig. 13 on the planar shear. At the oracle's detection the continuum is
+/// enriched ([`band_epoch::enrich`]): the cells within φ0 of the flagged ones take the grains of
+/// the consolidated DEM sample (the prepared packing, periodic across the cell's width) and
+/// the discrete ones lose their points. Those grains are then trained: driven by their
+/// boundary (the grains within one D50 of the region's faces) with the continuum's velocity
+/// there, from the start of the shear to the detection. Their stress against the full DEM's
+/// at the same strain.
 fn train_band(dem: &DemShear, run: &ContinuumShear) -> anyhow::Result<Training> {
+    let at = run.at_detection.as_ref().context("the oracle never fired")?;
+    Ok(enrich_and_train(dem, at, &run.history, run.cell)?.training)
+}
+
+/// The band's grains at the detection, enriched and trained ([`train_band`]), with what the
+/// hybrid step needs to go on: the plan (zones, the points to delete and scale), the trained
+/// state (released) and its pipeline.
+pub(super) struct Enriched {
+    pub(super) plan: grains_oracle::epoch::Plan,
+    pub(super) state: grains_dem::DemState<D2>,
+    pub(super) pipe: grains_dem::DemPipeline<D2>,
+    pub(super) training: Training,
+}
+
+/// [`train_band`] on the continuum `at` its detection, `history` its slab velocities up to it
+/// on cells `h` high.
+pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, Vec<[f64; 2]>)], h: f64) -> anyhow::Result<Enriched> {
     use grains_dem::training;
+    use grains_oracle::{Zone, band_epoch, epoch, shear_band};
     let t0 = std::time::Instant::now();
-    let (centre, continuum) = run.band.context("the oracle never fired")?;
-    let strain = run.detected.map_or(0.0, |d| d.0);
+    let (strain, continuum) = (at.strain, at.shear_stress);
     let d = dem.diameter;
-    let phi0 = PHI0_D * d;
-    let (lo, hi) = ((centre - phi0).max(0.0), (centre + phi0).min(dem.height));
+    let g0 = &dem.initial.grains;
+    let sample: Vec<usize> = (0..g0.len()).filter(|&i| !g0.frozen[i]).collect();
+    let first = *sample.first().context("an empty DEM sample")?;
+    let density = g0.mass[first] / (std::f64::consts::PI * g0.radius[first].powi(2));
+    let packing = band_epoch::Packing {
+        min: [0.0; 3],
+        period: [dem.width, 0.0, 0.0],
+        grains: sample.iter().map(|&i| (D2::to_array(g0.x[i]), g0.radius[i])).collect(),
+    };
+    let zones = shear_band::zones(&at.cells, 2, &at.flagged, PHI0_D * d, at.cells.h);
+    let previous = vec![Zone::Continuum; zones.len()];
+    let no_stress = std::collections::BTreeMap::new();
+    let input = epoch::Inputs {
+        nodes: &at.nodes,
+        kernel: at.kernel,
+        cells: &at.cells,
+        previous: &previous,
+        solid: &[],
+        clearance: &|_| f64::INFINITY,
+        grains: &[],
+        points: &at.points,
+        stress: &no_stress,
+    };
+    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, &packing, (WEIGHT, density), 0);
+    let before = epoch::totals(&at.cells, 2, &previous, WEIGHT, &[], &at.points);
+    let (mut new, mut points) = (Vec::new(), at.points.clone());
+    epoch::apply(&at.cells, 2, &plan, WEIGHT, density, &mut new, &mut points);
+    let after = epoch::totals(&at.cells, 2, &plan.zones, WEIGHT, &new, &points);
+    let scale = before.0 * dem.speed;
+    let enrichment = Enrichment {
+        grains: new.len(),
+        deleted: plan.delete_points.len(),
+        mass: (after.0 - before.0).abs() / before.0,
+        momentum: (0..2).map(|k| (after.1[k] - before.1[k]).abs()).fold(0.0, f64::max) / scale,
+        shift: shift[0].hypot(shift[1]) / dem.speed,
+    };
+    // The region the grains fill: the rows of cells that are not continuum.
+    let nx = at.cells.nodes[0] as usize;
+    let rows: Vec<usize> = (0..zones.len())
+        .filter(|&c| plan.zones[c] != Zone::Continuum)
+        .map(|c| c / nx)
+        .collect();
+    let (r0, r1) = (
+        rows.iter().min().context("no cell enriched")?,
+        rows.iter().max().context("no cell enriched")?,
+    );
+    let (lo, hi) = (
+        at.cells.origin[1] + *r0 as f64 * at.cells.h,
+        at.cells.origin[1] + (*r1 + 1) as f64 * at.cells.h,
+    );
+    // Training starts where the shear did: the grains as cut, at rest.
     let mut state = dem.initial.clone();
     state.grains = Default::default();
-    let g0 = &dem.initial.grains;
-    for i in (0..g0.len()).filter(|&i| !g0.frozen[i]) {
-        let y = D2::to_array(g0.x[i])[1];
-        if (lo..=hi).contains(&y) {
-            let k = state.grains.push(g0.id[i], g0.x[i], g0.radius[i], g0.mass[i], g0.material[i]);
-            state.grains.v[k] = g0.v[i];
-        }
+    for g in &new {
+        state.grains.push(g.id, D2::from_array(g.x), g.radius, g.mass, g0.material[first]);
     }
-    let grains = state.grains.len();
     let height = |x: <D2 as Space>::V| D2::to_array(x)[1];
     let shell = training::shell(&state, |x| (lo - height(x)).max(height(x) - hi), d);
     let area = dem.width * (hi - lo);
     // The continuum's velocity at height y, time t: the slab means, linear in y between slab
     // centres, the record nearest in time.
-    let h = run.cell;
-    let history = &run.history;
     let velocity = |x: <D2 as Space>::V, t: f64| {
         let k = history.partition_point(|r| r.0 < t).min(history.len() - 1);
         let slabs = &history[k].1;
@@ -93,15 +168,21 @@ fn train_band(dem: &DemShear, run: &ContinuumShear) -> anyhow::Result<Training> 
         .map(|(_, s)| s[2].abs())
         .collect();
     anyhow::ensure!(!near.is_empty(), "the DEM has no stress near strain {strain:.3}");
-    Ok(Training {
+    let training = Training {
         slab: (lo / d, hi / d),
-        grains,
+        enrichment,
         strain,
         continuum: continuum.abs(),
         dem: near.iter().sum::<f64>() / near.len() as f64,
         trained,
         untrained,
         wall: t0.elapsed().as_secs_f64(),
+    };
+    Ok(Enriched {
+        plan,
+        state,
+        pipe,
+        training,
     })
 }
 
@@ -109,14 +190,18 @@ fn train_band(dem: &DemShear, run: &ContinuumShear) -> anyhow::Result<Training> 
 pub(super) fn training_report(dem: &DemShear, runs: &[ContinuumShear], part: &mut Part, md: &mut String) {
     let _ = writeln!(
         md,
-        "#### Kinematic training (§4.1.1, Fig. 13)\n\nAt the oracle's detection, the slab φ0 = {PHI0_D} D50 either side of \
-         the band's centre is cut from the consolidated DEM sample (as it was before the shear) and trained: the grains within \
-         one D50 of its faces move with the continuum's velocity there (slab means of the points, recorded every \
-         {ORACLE_EVERY} steps), the others freely, from the start of the shear to the detection. Shear stress σ_xy \
-         (magnitudes; the DEM's is the whole cell's, which equilibrium makes the same at every height, averaged over \
+        "#### Enrichment and kinematic training (§4, §4.1.1, Fig. 13)\n\nAt the oracle's detection the continuum is enriched \
+         (`grains_oracle::band_epoch`): the cells within φ0 = {PHI0_D} D50 of the flagged ones (less half a cell: discrete; \
+         the next cell either side: hybrid, w = {WEIGHT}) take the grains of the consolidated DEM sample whose centres lie \
+         in them (the prepared packing, periodic across the cell's width, as it was before the shear), the discrete cells lose \
+         their points, the points left take the mass the grains do not carry, and the new grains one velocity change that keeps \
+         the momentum. Mass and momentum are compared as the solvers weigh them, before and after. Then the grains are trained: \
+         those within one D50 of the region's faces move with the continuum's velocity there (slab means of the points, \
+         recorded every {ORACLE_EVERY} steps), the others freely, from the start of the shear to the detection. Shear stress \
+         σ_xy (magnitudes; the DEM's is the whole cell's, which equilibrium makes the same at every height, averaged over \
          ±0.005 of strain). Paper: trained 125 kPa against the DEM's 121 (3%), untrained 6 kPa (95% off).\n\n\
-         | cell | slab | grains | strain | continuum σ_xy | DEM σ_xy | trained σ_xy (σ_yy) | untrained σ_xy (σ_yy) | wall |\n\
-         |---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+         | cell | region | grains | points deleted | mass change | momentum change | velocity change | strain | continuum σ_xy | DEM σ_xy | trained σ_xy (σ_yy) | untrained σ_xy (σ_yy) | wall |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for r in runs {
         let cells = r.cell / dem.diameter;
@@ -125,10 +210,14 @@ pub(super) fn training_report(dem: &DemShear, runs: &[ContinuumShear], part: &mu
                 let off = |s: [f64; 3]| (s[2].abs() - t.dem).abs() / t.dem;
                 let _ = writeln!(
                     md,
-                    "| {cells:.0} D50 | {:.0}–{:.0} D50 | {} | {:.3} | {:.0} Pa | {:.0} Pa | {:.0} Pa ({:.0}), {:.0}% off | {:.0} Pa ({:.0}), {:.0}% off | {:.0} s |",
+                    "| {cells:.0} D50 | {:.0}–{:.0} D50 | {} | {} | {:.1e} | {:.1e} m V | {:.1e} V | {:.3} | {:.0} Pa | {:.0} Pa | {:.0} Pa ({:.0}), {:.0}% off | {:.0} Pa ({:.0}), {:.0}% off | {:.0} s |",
                     t.slab.0,
                     t.slab.1,
-                    t.grains,
+                    t.enrichment.grains,
+                    t.enrichment.deleted,
+                    t.enrichment.mass,
+                    t.enrichment.momentum,
+                    t.enrichment.shift,
                     t.strain,
                     t.continuum,
                     t.dem,
@@ -139,6 +228,20 @@ pub(super) fn training_report(dem: &DemShear, runs: &[ContinuumShear], part: &mu
                     t.untrained[1],
                     100.0 * off(t.untrained),
                     t.wall
+                );
+                let e = &t.enrichment;
+                part.check(
+                    format!("enrichment ({cells:.0}-D50 cells): mass and momentum kept"),
+                    "Chen 2021 §4: the grains replace the points' material",
+                    format!(
+                        "{} grains for {} points; mass {:.1e}, momentum {:.1e} m V; velocity change {:.1e} V",
+                        e.grains, e.deleted, e.mass, e.momentum, e.shift
+                    ),
+                    format!(
+                        "to round-off (1e-12); the velocity change under the mean shear rate × D50 ({:.1e} V)",
+                        dem.diameter / dem.height
+                    ),
+                    e.grains > 0 && e.mass < 1e-12 && e.momentum < 1e-12 && e.shift < dem.diameter / dem.height,
                 );
                 part.check(
                     format!("kinematic training ({cells:.0}-D50 cells): the trained packing holds the DEM's shear stress"),
@@ -161,7 +264,7 @@ pub(super) fn training_report(dem: &DemShear, runs: &[ContinuumShear], part: &mu
                 );
             }
             Err(e) => {
-                let _ = writeln!(md, "| {cells:.0} D50 | not trained: {e:#} | | | | | | | |");
+                let _ = writeln!(md, "| {cells:.0} D50 | not trained: {e:#} | | | | | | | | | | | |");
                 part.check(
                     format!("kinematic training ({cells:.0}-D50 cells) ran"),
                     "every run completes",

@@ -1,0 +1,320 @@
+//! The hybrid planar shear (Chen 2021 §6.1, Fig. 11 middle): the continuum until the oracle
+//! fires, then the band's region enriched with trained grains ([`super::training`]) and the two
+//! models coupled on the shared nodes every step (Yue 2018 Alg. 2–6, as Chen §4.2 uses them).
+//! In process: the MPM's pipeline, the DEM's coupled stage and the coupler's function, one
+//! after the other, as the run's participants do over shared memory.
+
+use super::training::Enriched;
+use super::*;
+use grains_dem::coupled::{CoupledStep, CouplingParams, GrainTransfer};
+use grains_grid::Grid;
+use grains_mpm::pipeline::{MpmParams, MpmPipeline};
+use grains_mpm::points::Points;
+use grains_oracle::Zone;
+use grains_protocol::wire::{NodeVelocity, RasterNode};
+use std::collections::{HashMap, HashSet};
+
+use super::continuum::ContinuumShear;
+use super::training::WEIGHT;
+
+/// The hybrid's continuum cells [D50]: the coarse grid of the continuum's two (App. D: both
+/// detect), the cheaper one.
+pub(super) const HYBRID_CELL_D: f64 = 4.0;
+/// The grains' transfers back, one hybrid run each: Yue 2018 Alg. 5–6 as written (`"pic"`),
+/// and ours (`"flip"`, its spin never locked: the shear is quasi-static throughout).
+pub(super) const HYBRID_TRANSFERS: [(&str, GrainTransfer); 2] = [("pic", GrainTransfer::Pic), ("flip", GrainTransfer::Flip)];
+
+/// The DEM half of the hybrid planar shear and what it measures.
+pub(super) struct Coupled {
+    state: grains_dem::DemState<D2>,
+    pipe: grains_dem::DemPipeline<D2>,
+    step: CoupledStep<D2>,
+    zones: Vec<Zone>,
+    cells: Grid,
+    /// DEM substeps per MPM step.
+    pub(super) substeps: usize,
+    width: f64,
+    /// The grains' positions when the strain window opens, by id (x unwrapped from there).
+    reference: Option<HashMap<u64, [f64; 2]>>,
+    /// Σ over the steps of the coupler's report: shared nodes, and the largest momentum error
+    /// of a step over its momentum (it should be round-off: Alg. 3 conserves it).
+    pub(super) shared: u64,
+    pub(super) momentum_error: f64,
+    /// Coupled steps so far.
+    pub(super) steps: u64,
+}
+
+impl Coupled {
+    /// Takes the enriched band: the plan's deletions and mass factors applied to the MPM's
+    /// points, each point weighed by its cell's zone (w in a hybrid cell), each grain likewise
+    /// (1 − w); the DEM's substeps for the MPM's step `dt` at the DEM's own step `dem_dt`.
+    pub(super) fn new(
+        enriched: Enriched,
+        pts: &mut Points<D2>,
+        params: &MpmParams<D2>,
+        (cells, transfer): (Grid, GrainTransfer),
+        dt: f64,
+        dem_dt: f64,
+        width: f64,
+    ) -> Self {
+        let Enriched { plan, state, pipe, .. } = enriched;
+        let gone: HashSet<u64> = plan.delete_points.iter().copied().collect();
+        let keep: Vec<u32> = (0..pts.len()).filter(|&k| !gone.contains(&pts.id[k])).map(|k| k as u32).collect();
+        pts.retain_indices(&keep);
+        let factor: HashMap<u64, f64> = plan.scale_points.iter().copied().collect();
+        for k in 0..pts.len() {
+            if let Some(f) = factor.get(&pts.id[k]) {
+                pts.mass[k] *= f;
+                pts.volume[k] *= f;
+            }
+        }
+        let mut coupled = Coupled {
+            state,
+            pipe,
+            step: CoupledStep::new(CouplingParams {
+                grid: params.grid,
+                kernel: params.kernel,
+                transfer,
+                quasi_static: 0.0,
+                gravity: 0.0,
+            }),
+            zones: plan.zones,
+            cells,
+            substeps: (dt / dem_dt).ceil().max(1.0) as usize,
+            width,
+            reference: None,
+            shared: 0,
+            momentum_error: 0.0,
+            steps: 0,
+        };
+        for k in 0..pts.len() {
+            pts.weight[k] = if coupled.zone(D2::to_array(pts.x[k])) == Zone::Hybrid {
+                WEIGHT
+            } else {
+                1.0
+            };
+        }
+        coupled.weigh_grains();
+        coupled
+    }
+
+    fn zone(&self, x: [f64; 3]) -> Zone {
+        grains_oracle::epoch::cell_of(&self.cells, 2, x).map_or(Zone::Continuum, |c| self.zones[c])
+    }
+
+    /// Each grain's scale by the zone it is in now: 1 − w in a hybrid cell, 1 elsewhere (a
+    /// grain that strays into a continuum cell stays a grain, uncoupled).
+    fn weigh_grains(&mut self) {
+        let g = &mut self.state.grains;
+        for i in 0..g.len() {
+            let x = D2::to_array(g.x[i]);
+            let hybrid = grains_oracle::epoch::cell_of(&self.cells, 2, x).is_some_and(|c| self.zones[c] == Zone::Hybrid);
+            g.scale[i] = if hybrid { 1.0 - WEIGHT } else { 1.0 };
+        }
+    }
+
+    /// Between the MPM's phase 1 and phase 2 of a step `dt`: the DEM's substeps and raster, the
+    /// coupler's velocities on the shared nodes, and those velocities on the MPM's nodes.
+    /// Returns them for [`Coupled::finish`].
+    pub(super) fn couple(&mut self, mpm: &mut MpmPipeline<D2>, params: &MpmParams<D2>, dt: f64) -> anyhow::Result<Vec<NodeVelocity>> {
+        self.weigh_grains();
+        let grid = params.grid;
+        let mut mpm_raster = Vec::new();
+        mpm.for_each_node_mut(|ijk, mass, v| {
+            if let Some(node) = grid.index(ijk) {
+                mpm_raster.push(RasterNode {
+                    node,
+                    mass,
+                    momentum: D2::to_array(*v * mass),
+                });
+            }
+        });
+        mpm_raster.sort_unstable_by_key(|r| r.node);
+        self.step.predict(&mut self.state, &mut self.pipe, dt, self.substeps);
+        let dem_raster: Vec<RasterNode> = (0..self.step.raster().len())
+            .map(|k| {
+                let r = &self.step.raster()[k];
+                RasterNode {
+                    node: r.node,
+                    mass: r.mass,
+                    momentum: D2::to_array(self.step.uncoupled_momentum(k)),
+                }
+            })
+            .collect();
+        let mut out = vec![NodeVelocity::default(); grains_coupler::count_shared(&dem_raster, &mpm_raster)];
+        let report = grains_coupler::constrain(&dem_raster, &mpm_raster, &mut out);
+        self.shared += report.shared_nodes;
+        self.steps += 1;
+        let p = |v: [f64; 3]| v[0].hypot(v[1]);
+        let change = p([0, 1, 2].map(|k| report.momentum_after[k] - report.momentum_before[k]));
+        if p(report.momentum_before) > 0.0 {
+            self.momentum_error = self.momentum_error.max(change / p(report.momentum_before));
+        }
+        for nv in &out {
+            let v = mpm
+                .node_velocity_mut(grid.ijk(nv.node))
+                .with_context(|| format!("the coupler constrained node {} where the MPM has no material", nv.node))?;
+            *v = D2::from_array(nv.velocity);
+        }
+        Ok(out)
+    }
+
+    /// After the MPM's phase 2: the grains take the constrained velocities back (Alg. 5–6).
+    pub(super) fn finish(&mut self, constrained: &[NodeVelocity], dt: f64) -> anyhow::Result<()> {
+        let given = constrained.iter().map(|nv| (nv.node, D2::from_array(nv.velocity)));
+        self.step.finish(&mut self.state, &mut self.pipe, given, dt);
+        if let Some(id) = grains_dem::pipeline::DemPipeline::first_non_finite(&self.state) {
+            anyhow::bail!("grain {id} is not finite: the hybrid planar shear blew up");
+        }
+        Ok(())
+    }
+
+    /// The grains' positions now, by id, x unwrapped against the window's start.
+    fn positions(&self) -> HashMap<u64, [f64; 2]> {
+        positions_of(&self.state, self.width, |_| true, self.reference.as_ref())
+    }
+
+    /// Marks the strain window's start.
+    pub(super) fn open_window(&mut self) {
+        if self.reference.is_none() {
+            self.reference = Some(self.positions());
+        }
+    }
+
+    /// The band over the strain window (App. A, as the DEM's) in the grains that were in
+    /// discrete or hybrid cells when it opened, their number, and the number of grains in
+    /// continuum cells at the end (strays: uncoupled, which an oracle epoch would delete).
+    pub(super) fn band(&self, d: f64, height: f64) -> anyhow::Result<(Measured, usize, usize)> {
+        let from = self.reference.as_ref().context("the hybrid shear reached the window's start")?;
+        let inside = |p: &[f64; 2]| self.zone([p[0].rem_euclid(self.width), p[1], 0.0]) != Zone::Continuum;
+        let from: HashMap<u64, [f64; 2]> = from.iter().filter(|(_, p)| inside(p)).map(|(&id, &p)| (id, p)).collect();
+        let now = self.positions();
+        let strays = now.values().filter(|p| !inside(p)).count();
+        Ok((band_of(&from, &now, d, self.width, height)?, from.len(), strays))
+    }
+}
+
+/// A τ/σ_yy curve: (strain, value).
+type Curve = Vec<(f64, f64)>;
+
+/// The hybrid planar shears' table, checks and the band's picture: one run per transfer of
+/// [`HYBRID_TRANSFERS`], on cells of [`HYBRID_CELL_D`] D50. Returns each finished run's τ/σ_yy
+/// curve, labelled.
+pub(super) fn hybrid_report(
+    args: &ValidateArgs,
+    dem: &DemShear,
+    runs: Vec<(&str, anyhow::Result<ContinuumShear>)>,
+    part: &mut Part,
+    md: &mut String,
+) -> anyhow::Result<Vec<(String, Curve)>> {
+    let _ = writeln!(
+        md,
+        "### §6.1: planar shear, hybrid\n\nThe continuum on {HYBRID_CELL_D}-D50 cells until the oracle fires; then its band enriched and \
+         trained as above (the grains of the DEM's seed-1 sample, the same sample as the DEM's first run) and coupled from there \
+         to the end: each MPM step the DEM's substeps, the hybrid cells' grains (mass and springs × 1 − w) and points (× w) \
+         rasterized on the MPM's nodes, the coupler's common velocity on the nodes both have (Yue 2018 Alg. 3, Chen §5), the \
+         points' phase 2 and the grains' transfer back: Alg. 5–6 as written (`\"pic\"`: a hybrid grain takes the grid's velocity \
+         and spin) and ours (`\"flip\"`: it keeps its own and adds the coupling's change). The zones stay as the enrichment made \
+         them. The band is measured as the DEM's (App. A, same window) in the grains that were in discrete or hybrid cells when \
+         the window opened; grains that end in continuum cells (strays: uncoupled, which an oracle epoch would delete) are \
+         counted. The stress is the points' mean (equilibrium makes σ_xy the same at every height).\n\n\
+         | | grains (measured) | strays | DEM substeps | t_s (App. A) | band centre | slab profile at half peak | peak τ/σ_yy (strain) | mean τ/σ_yy over the window | shared nodes a step | coupler's momentum error | wall |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n\
+         | DEM, seed 1 | {GRAINS} | | | {:.1} D50 | {:.1} D50 | {:.0} D50 | {:.3} ({:.2}) | {:.3} | | | {:.0} s |",
+        dem.t_s, dem.centre, dem.fwhm, dem.peak.1, dem.peak.0, dem.residual, dem.wall
+    );
+    let mut curves = Vec::new();
+    let mut profiles = vec![Series::new("DEM, seed 1", Kind::LinePoints, dem.profile.clone())];
+    let mut region = None;
+    for (name, run) in runs {
+        let run = match run.and_then(|r| r.hybrid.is_some().then_some(r).context("the oracle never fired: nothing enriched")) {
+            Ok(r) => r,
+            Err(e) => {
+                let _ = writeln!(md, "| hybrid, `{name}` | did not finish: {e:#} | | | | | | | | | | |");
+                part.check(
+                    format!("planar shear (hybrid, {name}) ran to its end"),
+                    "every run completes",
+                    format!("{e:#}"),
+                    "no error",
+                    false,
+                );
+                continue;
+            }
+        };
+        let Some(h) = run.hybrid.as_ref() else { continue };
+        let (peak, residual) = softening(&run.curve);
+        let slab = h.training.slab;
+        region = Some(slab);
+        let (t_s, centre, fwhm, grains, strays) = match &h.band {
+            Ok((m, grains, strays)) => (m.t_s, m.centre, m.fwhm, grains.to_string(), strays.to_string()),
+            Err(e) => (f64::NAN, f64::NAN, f64::NAN, format!("no band: {e:#}"), String::new()),
+        };
+        let _ = writeln!(
+            md,
+            "| hybrid, `{name}` | {grains} | {strays} | {} | {t_s:.1} D50 | {centre:.1} D50 | {fwhm:.0} D50 | {:.3} ({:.2}) | {residual:.3} | {:.0} | {:.1e} | {:.0} s |",
+            h.substeps,
+            peak.1,
+            peak.0,
+            h.shared as f64 / h.steps.max(1) as f64,
+            h.momentum_error,
+            run.wall,
+        );
+        part.check(
+            format!("planar shear (hybrid, {name}): the band's thickness"),
+            format!(
+                "Chen 2021 Fig. 11: the hybrid's band is the DEM's (22 D50 both); here the DEM's on the same sample, {:.1} D50",
+                dem.t_s
+            ),
+            format!("{t_s:.1} D50 at {centre:.1} D50 up"),
+            "within 2 D50 of the DEM's (issue 22)",
+            (t_s - dem.t_s).abs() <= 2.0,
+        );
+        part.check(
+            format!("planar shear (hybrid, {name}): the band forms within the grains, not at their edge"),
+            "Chen 2021 §4, Fig. 11: the enrichment holds the band; its discrete zone runs to a cell from the region's faces",
+            format!(
+                "centre {centre:.1} D50, t_s {t_s:.1} D50; grains from {:.0} to {:.0} D50",
+                slab.0, slab.1
+            ),
+            "the band (centre ± t_s / 2) at least a cell inside the discrete zone's faces",
+            centre - 0.5 * t_s > slab.0 + 2.0 * HYBRID_CELL_D && centre + 0.5 * t_s < slab.1 - 2.0 * HYBRID_CELL_D,
+        );
+        part.check(
+            format!("planar shear (hybrid, {name}): the coupler keeps momentum"),
+            "Yue 2018 Alg. 3: one velocity per shared node from the summed momenta",
+            format!("largest error of a step {:.1e} of its momentum", h.momentum_error),
+            "round-off (1e-9)",
+            h.momentum_error < 1e-9,
+        );
+        if let Ok((m, _, _)) = &h.band {
+            profiles.push(Series::new(format!("hybrid, {name} (grains)"), Kind::LinePoints, m.profile.clone()));
+        }
+        curves.push((format!("hybrid, {name}"), run.curve));
+    }
+    if let Some((lo, hi)) = region {
+        let _ = writeln!(
+            md,
+            "\nThe enrichment region: {lo:.0}–{hi:.0} D50 (discrete from {:.0} to {:.0}). The hybrid's wall time includes its \
+             continuum up to the detection and the training.\n",
+            lo + HYBRID_CELL_D,
+            hi - HYBRID_CELL_D
+        );
+    }
+    let chart = Chart {
+        title: format!(
+            "Planar shear: incremental strain {}-{} across the specimen, DEM and hybrid",
+            WINDOW.0, WINDOW.1
+        ),
+        x_label: "mean deviatoric strain of a slab (grains: best fit)".into(),
+        y_label: "height [D50]".into(),
+        series: profiles,
+        ..Chart::default()
+    };
+    part.chart(
+        &args.out,
+        "shear_planar_profiles_hybrid",
+        "Planar shear: the DEM's band and the hybrid's",
+        &chart,
+    )?;
+    Ok(curves)
+}
