@@ -43,7 +43,7 @@ pub(super) struct ContinuumShear {
 /// substeps per step, the coupler's shared nodes summed over its steps and its largest
 /// momentum error of a step, and the enrichment and training at the detection.
 pub(super) struct HybridShear {
-    pub(super) band: anyhow::Result<(Measured, usize, usize)>,
+    pub(super) band: anyhow::Result<(Measured, usize, [usize; 2])>,
     pub(super) substeps: usize,
     pub(super) shared: u64,
     pub(super) steps: u64,

@@ -183,13 +183,15 @@ impl Coupled {
 
     /// The band over the strain window (App. A, as the DEM's) in the grains that were in
     /// discrete or hybrid cells when it opened, their number, and the number of grains in
-    /// continuum cells at the end (strays: uncoupled, which an oracle epoch would delete).
-    pub(super) fn band(&self, d: f64, height: f64) -> anyhow::Result<(Measured, usize, usize)> {
+    /// continuum cells at the end (strays: uncoupled, which an oracle epoch would delete),
+    /// below and above the region's middle.
+    pub(super) fn band(&self, d: f64, height: f64) -> anyhow::Result<(Measured, usize, [usize; 2])> {
         let from = self.reference.as_ref().context("the hybrid shear reached the window's start")?;
         let inside = |p: &[f64; 2]| self.zone([p[0].rem_euclid(self.width), p[1], 0.0]) != Zone::Continuum;
         let from: HashMap<u64, [f64; 2]> = from.iter().filter(|(_, p)| inside(p)).map(|(&id, &p)| (id, p)).collect();
         let now = self.positions();
-        let strays = now.values().filter(|p| !inside(p)).count();
+        let middle = from.values().map(|p| p[1]).sum::<f64>() / from.len().max(1) as f64;
+        let strays = [false, true].map(|up| now.values().filter(|p| !inside(p) && (p[1] > middle) == up).count());
         Ok((band_of(&from, &now, d, self.width, height)?, from.len(), strays))
     }
 }
@@ -218,7 +220,7 @@ pub(super) fn hybrid_report(
          them. The band is measured as the DEM's (App. A, same window) in the grains that were in discrete or hybrid cells when \
          the window opened; grains that end in continuum cells (strays: uncoupled, which an oracle epoch would delete) are \
          counted. The stress is the points' mean (equilibrium makes σ_xy the same at every height).\n\n\
-         | | grains (measured) | strays | DEM substeps | t_s (App. A) | band centre | slab profile at half peak | peak τ/σ_yy (strain) | mean τ/σ_yy over the window | shared nodes a step | coupler's momentum error | wall |\n\
+         | | grains (measured) | strays (below / above) | DEM substeps | t_s (App. A) | band centre | slab profile at half peak | peak τ/σ_yy (strain) | mean τ/σ_yy over the window | shared nodes a step | coupler's momentum error | wall |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n\
          | DEM, seed 1 | {GRAINS} | | | {:.1} D50 | {:.1} D50 | {:.0} D50 | {:.3} ({:.2}) | {:.3} | | | {:.0} s |",
         dem.t_s, dem.centre, dem.fwhm, dem.peak.1, dem.peak.0, dem.residual, dem.wall
@@ -246,7 +248,13 @@ pub(super) fn hybrid_report(
         let slab = h.training.slab;
         region = Some(slab);
         let (t_s, centre, fwhm, grains, strays) = match &h.band {
-            Ok((m, grains, strays)) => (m.t_s, m.centre, m.fwhm, grains.to_string(), strays.to_string()),
+            Ok((m, grains, strays)) => (
+                m.t_s,
+                m.centre,
+                m.fwhm,
+                grains.to_string(),
+                format!("{} / {}", strays[0], strays[1]),
+            ),
             Err(e) => (f64::NAN, f64::NAN, f64::NAN, format!("no band: {e:#}"), String::new()),
         };
         let _ = writeln!(
