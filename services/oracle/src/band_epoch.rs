@@ -11,7 +11,9 @@
 //! at the packing's own state; kinematic training (`grains_dem::training`) then takes them
 //! through the continuum's deformation.
 
-use crate::epoch::{Inputs, NewGrain, Plan, cell_corner, cell_of, conserve_mass, grain_volume, interpolate, momentum_on_nodes};
+use crate::epoch::{
+    Inputs, NewGrain, Plan, cell_corner, cell_masses, cell_of, conserve_mass, grain_volume, interpolate, momentum_on_nodes,
+};
 use crate::{Zone, dims};
 use grains_grid::Space;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -95,17 +97,7 @@ pub fn enrich<S: Space>(
         .zip(band)
         .map(|(&a, &b)| if rank(b) > rank(a) { b } else { a })
         .collect();
-    let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
-    for g in input.grains.iter().filter(|g| !g.fixed) {
-        if let Some(c) = cell_of(cells, dim, g.x) {
-            grain_mass[c] += g.mass;
-        }
-    }
-    for p in input.points {
-        if let Some(c) = cell_of(cells, dim, p.x) {
-            point_mass[c] += p.mass;
-        }
-    }
+    let (grain_mass, point_mass) = cell_masses(input, dim);
     let need: BTreeSet<usize> = (0..count)
         .filter(|&c| zones[c] != Zone::Continuum && point_mass[c] > 0.0 && grain_mass[c] < 0.5 * point_mass[c])
         .collect();

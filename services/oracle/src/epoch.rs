@@ -260,17 +260,7 @@ impl<'a> Epoch<'a> {
         let n = dims(cells, dim);
         let count: usize = n.iter().product();
         assert_eq!(input.previous.len(), count, "one previous zone per cell");
-        let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
-        for g in input.grains.iter().filter(|g| !g.fixed) {
-            if let Some(c) = cell_of(cells, dim, g.x) {
-                grain_mass[c] += g.mass;
-            }
-        }
-        for p in input.points {
-            if let Some(c) = cell_of(cells, dim, p.x) {
-                point_mass[c] += p.mass;
-            }
-        }
+        let (grain_mass, point_mass) = cell_masses(input, dim);
         Epoch {
             input,
             s,
@@ -633,6 +623,23 @@ impl<'a> Epoch<'a> {
             keep
         });
     }
+}
+
+/// The full mass of the grains (fixed ones left out) and of the points in every cell [kg].
+pub(crate) fn cell_masses(input: &Inputs<'_>, dim: usize) -> (Vec<f64>, Vec<f64>) {
+    let count: usize = dims(input.cells, dim).iter().product();
+    let (mut grain_mass, mut point_mass) = (vec![0.0; count], vec![0.0; count]);
+    for g in input.grains.iter().filter(|g| !g.fixed) {
+        if let Some(c) = cell_of(input.cells, dim, g.x) {
+            grain_mass[c] += g.mass;
+        }
+    }
+    for p in input.points {
+        if let Some(c) = cell_of(input.cells, dim, p.x) {
+            point_mass[c] += p.mass;
+        }
+    }
+    (grain_mass, point_mass)
 }
 
 /// The mass and momentum of `items` (position, mass, velocity) on the nodes, with the MPM's
