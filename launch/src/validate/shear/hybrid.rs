@@ -4,7 +4,8 @@
 //! In process: the MPM's pipeline, the DEM's coupled stage and the coupler's function, one
 //! after the other, as the run's participants do over shared memory.
 
-use super::training::Enriched;
+use super::continuum::ContinuumShear;
+use super::training::{Enriched, WEIGHT};
 use super::*;
 use grains_dem::coupled::{CoupledStep, CouplingParams, GrainTransfer};
 use grains_grid::Grid;
@@ -14,15 +15,17 @@ use grains_oracle::Zone;
 use grains_protocol::wire::{NodeVelocity, RasterNode};
 use std::collections::{HashMap, HashSet};
 
-use super::continuum::ContinuumShear;
-use super::training::WEIGHT;
-
 /// The hybrid's continuum cells [D50]: the coarse grid of the continuum's two (App. D: both
 /// detect), the cheaper one.
 pub(super) const HYBRID_CELL_D: f64 = 4.0;
 /// The grains' transfers back, one hybrid run each: Yue 2018 Alg. 5–6 as written (`"pic"`),
 /// and ours (`"flip"`, its spin never locked: the shear is quasi-static throughout).
 pub(super) const HYBRID_TRANSFERS: [(&str, GrainTransfer); 2] = [("pic", GrainTransfer::Pic), ("flip", GrainTransfer::Flip)];
+
+/// The zone of the cell at `x` (off the grid: continuum).
+fn zone_at(cells: &Grid, zones: &[Zone], x: [f64; 3]) -> Zone {
+    grains_oracle::epoch::cell_of(cells, 2, x).map_or(Zone::Continuum, |c| zones[c])
+}
 
 /// The DEM half of the hybrid planar shear and what it measures.
 pub(super) struct Coupled {
@@ -99,7 +102,7 @@ impl Coupled {
     }
 
     fn zone(&self, x: [f64; 3]) -> Zone {
-        grains_oracle::epoch::cell_of(&self.cells, 2, x).map_or(Zone::Continuum, |c| self.zones[c])
+        zone_at(&self.cells, &self.zones, x)
     }
 
     /// Each grain's scale by the zone it is in now: 1 − w in a hybrid cell, 1 elsewhere (a
@@ -107,8 +110,7 @@ impl Coupled {
     fn weigh_grains(&mut self) {
         let g = &mut self.state.grains;
         for i in 0..g.len() {
-            let x = D2::to_array(g.x[i]);
-            let hybrid = grains_oracle::epoch::cell_of(&self.cells, 2, x).is_some_and(|c| self.zones[c] == Zone::Hybrid);
+            let hybrid = zone_at(&self.cells, &self.zones, D2::to_array(g.x[i])) == Zone::Hybrid;
             g.scale[i] = if hybrid { 1.0 - WEIGHT } else { 1.0 };
         }
     }
