@@ -233,13 +233,24 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dem: &DemShear, part: 
         "Planar shear: τ/σ_yy against strain, the DEM, the continuum and the hybrid overlaid",
         &stress,
     )?;
+    if let Err(e) = super::large::large_planar_shear(args, dem, &model, scene.materials[material].density, part, md) {
+        tracing::error!("validate shear: the large planar shear failed: {e:#}");
+        let _ = writeln!(md, "### §6.4: a large planar shear, cost\n\nDid not finish: {e:#}\n");
+        part.check(
+            "large planar shear ran to its end",
+            "every run completes",
+            format!("{e:#}"),
+            "no error",
+            false,
+        );
+    }
     Ok(())
 }
 
 /// One continuum planar shear on cells of `cell_d` grain diameters; with `hybrid` (the
 /// grains' transfer back), the hybrid's: at the detection the band is enriched and trained,
 /// and the grains coupled from there on ([`Coupled`]).
-fn continuum_run(
+pub(super) fn continuum_run(
     dem: &DemShear,
     model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
     grain_density: f64,

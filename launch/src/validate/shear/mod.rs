@@ -7,7 +7,8 @@
 //! driven sideways under a constant normal stress), with the band measured by App. A's rule
 //! ([`grains_oracle::band`]): its thickness against the paper's 22 D50, the stress against
 //! strain (Fig. 10: softening as the band forms), and the incremental strain's profile across
-//! the specimen.
+//! the specimen; the same sample again with cohesive bonds (§6.1.1). A specimen many times as
+//! tall as the hybrid, for its cost against the DEM's (§6.4, [`large`]).
 //!
 //! The grains are the column scenes' glass beads, which are Chen's Table 1 (k_n 1.77e6 N/m,
 //! γ 7 N s/m, d 1 ± 0.08 mm, ρ 2530, μ 0.5). Chen's γ_n = 7 N s/m at e = 0.1 fixes its grain
@@ -32,6 +33,7 @@ use std::fmt::Write as _;
 
 mod continuum;
 mod hybrid;
+mod large;
 mod training;
 
 /// The scene whose grains the planar shear uses (Chen's Table 1).
@@ -79,6 +81,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
 }
 
 /// What the DEM planar shear hands the continuum's: the specimen, its packing, the band.
+#[derive(Clone)]
 struct DemShear {
     /// Period and height after consolidation [m], mean grain diameter [m].
     width: f64,
@@ -105,6 +108,9 @@ struct DemShear {
     peak: (f64, f64),
     residual: f64,
     wall: f64,
+    /// The shear alone (after consolidation): its steps and wall time [s].
+    shear_steps: usize,
+    shear_wall: f64,
 }
 
 /// Sample grains' positions by id, x unwrapped against `reference` (the period is `width`).
@@ -215,11 +221,15 @@ struct DemRun {
     peak: (f64, f64),
     residual: f64,
     wall: f64,
+    shear_steps: usize,
+    shear_wall: f64,
 }
 
 /// The planar shear of seed `seed`: consolidated with μ = 0.01, glued boundaries, sheared
-/// with the material's μ; its band by App. A over the window.
-fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> anyhow::Result<DemRun> {
+/// with the material's μ and, if `bond` > 0, Chen's cohesion (§2.1) e_n = e_t = `bond` [N/m]
+/// from the shear's start (every contact of the consolidated sample bonds); its band by App. A
+/// over the window.
+fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, bond: f64) -> anyhow::Result<DemRun> {
     let t0 = std::time::Instant::now();
     let dem = scene.materials[material].dem.as_ref().context("a DEM material")?;
     let (mu, d) = (dem.friction, 2.0 * dem.radius);
@@ -230,6 +240,9 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) ->
     cell.consolidate().context("consolidating the planar shear at mu = 0.01")?;
     cell.state.params.materials[0].friction = mu;
     cell.glue(GLUE_D * d);
+    for m in &mut cell.state.params.materials {
+        (m.cohesion_normal, m.cohesion_tangential) = (bond, bond);
+    }
     // The discrete version of the initial system, which kinematic training starts from.
     let initial = cell.state.clone();
     let packing = cell.packing();
@@ -243,6 +256,7 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) ->
     );
     // Shear: the top at `speed`, its height a servo on σ_yy; every SERVO steps the stress.
     let steps = (WINDOW.1 * cell.width / speed / cell.dt).ceil() as usize;
+    let shear_start = std::time::Instant::now();
     let mut curve: Vec<(f64, f64)> = Vec::new();
     let mut stresses: Vec<(f64, [f64; 3])> = Vec::new();
     let mut reference = None;
@@ -272,6 +286,7 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) ->
             );
         }
     }
+    let shear_wall = shear_start.elapsed().as_secs_f64();
     let from = reference.context("the shear reached the window's start")?;
     let to = positions(&cell, Some(&from));
     let Measured {
@@ -306,6 +321,8 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) ->
         peak,
         residual,
         wall: t0.elapsed().as_secs_f64(),
+        shear_steps: step,
+        shear_wall,
     })
 }
 
@@ -320,7 +337,7 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
     let (mu, d) = (dem.friction, 2.0 * dem.radius);
     let runs: Vec<DemRun> = SEEDS
         .iter()
-        .map(|&seed| dem_run(&scene, material, seed))
+        .map(|&seed| dem_run(&scene, material, seed, 0.0))
         .collect::<anyhow::Result<_>>()?;
     let first = &runs[0];
     let _ = writeln!(
@@ -390,14 +407,21 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         "peak above the window's mean on every seed",
         runs.iter().all(|r| r.peak.1 > r.residual),
     );
+    let cohesive = cohesion(&scene, material, &runs[0], part, md)?;
+    let mut curves: Vec<Series> = runs
+        .iter()
+        .map(|r| Series::new(format!("DEM, seed {}", r.seed), Kind::Line, r.curve.clone()))
+        .collect();
+    curves.push(Series::new(
+        format!("DEM, seed {}, cohesive", cohesive.seed),
+        Kind::Line,
+        cohesive.curve.clone(),
+    ));
     let stress = Chart {
         title: "Planar shear (DEM): shear over normal stress against strain".into(),
         x_label: "strain (top travel / width)".into(),
         y_label: "tau_xy / sigma_yy".into(),
-        series: runs
-            .iter()
-            .map(|r| Series::new(format!("DEM, seed {}", r.seed), Kind::Line, r.curve.clone()))
-            .collect(),
+        series: curves,
         ..Chart::default()
     };
     part.chart(
@@ -410,6 +434,11 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         .iter()
         .map(|r| Series::new(format!("DEM, seed {}", r.seed), Kind::LinePoints, r.profile.clone()))
         .collect();
+    series.push(Series::new(
+        format!("DEM, seed {}, cohesive", cohesive.seed),
+        Kind::LinePoints,
+        cohesive.profile.clone(),
+    ));
     series.push(Series::new(
         "98th percentile, seed 1",
         Kind::Dashed,
@@ -472,7 +501,74 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         peak: first.peak,
         residual: first.residual,
         wall: first.wall,
+        shear_steps: first.shear_steps,
+        shear_wall: first.shear_wall,
     })
+}
+
+/// Chen's cohesive grains (§2.1, §6.1.1) as a Bond number: e_n = e_t = BOND P d, a bond holds
+/// half the mean contact force at the confining pressure. The paper gives no values for e_n
+/// and e_t; this is a choice, not a calibration.
+const BOND: f64 = 0.5;
+
+/// §6.1.1: the planar shear of `dry`'s sample again with cohesive bonds, against the dry run
+/// (Fig. 12: the cohesive band is thinner, its yield stress higher, its softening stronger).
+fn cohesion(
+    scene: &grains_protocol::scene::Scene,
+    material: usize,
+    dry: &DemRun,
+    part: &mut Part,
+    md: &mut String,
+) -> anyhow::Result<DemRun> {
+    let d = 2.0 * scene.materials[material].dem.as_ref().context("a DEM material")?.radius;
+    let bond = BOND * PRESSURE * d;
+    let r = dem_run(scene, material, dry.seed, bond)?;
+    let _ = writeln!(
+        md,
+        "#### §6.1.1: cohesion\n\nThe same sample (seed {}) sheared with Chen's bonds (§2.1: a contact that has closed \
+         holds tension up to e_n and adds e_t to its Coulomb cap) with e_n = e_t = {BOND} P d = {bond:.1} N/m. The paper \
+         gives no values for them; a bond here holds half the mean contact force at the confining pressure. The continuum \
+         and the hybrid are not run cohesive.\n\n\
+         | grains | t_s (App. A) | band centre | slab profile at half peak | peak τ/σ_yy (strain) | mean τ/σ_yy over the window | peak − mean | wall |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|",
+        dry.seed
+    );
+    for (name, x) in [("dry", dry), ("cohesive", &r)] {
+        let _ = writeln!(
+            md,
+            "| {name} | {:.1} D50 | {:.1} D50 | {:.0} D50 | {:.3} ({:.2}) | {:.3} | {:.3} | {:.0} s |",
+            x.t_s,
+            x.centre,
+            x.fwhm,
+            x.peak.1,
+            x.peak.0,
+            x.residual,
+            x.peak.1 - x.residual,
+            x.wall
+        );
+    }
+    let _ = writeln!(md);
+    part.check(
+        "planar shear (DEM): a cohesive band is thinner",
+        "Chen 2021 §6.1.1, Fig. 12: the cohesive band is thinner than the dry one",
+        format!("t_s {:.1} D50 cohesive, {:.1} D50 dry (seed {})", r.t_s, dry.t_s, dry.seed),
+        "cohesive < dry",
+        r.t_s < dry.t_s,
+    );
+    part.check(
+        "planar shear (DEM): cohesion raises the yield stress and the softening",
+        "Chen 2021 §6.1.1, Fig. 12: a higher yield stress and more intense softening",
+        format!(
+            "peak τ/σ {:.3} cohesive, {:.3} dry; peak − window mean {:.3} cohesive, {:.3} dry",
+            r.peak.1,
+            dry.peak.1,
+            r.peak.1 - r.residual,
+            dry.peak.1 - dry.residual
+        ),
+        "both larger with cohesion",
+        r.peak.1 > dry.peak.1 && r.peak.1 - r.residual > dry.peak.1 - dry.residual,
+    );
+    Ok(r)
 }
 
 /// Slabs of the strain profiles [D50].

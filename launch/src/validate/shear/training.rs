@@ -20,7 +20,7 @@ pub(super) const WEIGHT: f64 = 0.5;
 /// new grains' velocity change that keeps the momentum (over the top's speed).
 #[derive(Clone)]
 pub(super) struct Enrichment {
-    grains: usize,
+    pub(super) grains: usize,
     deleted: usize,
     mass: f64,
     momentum: f64,
@@ -32,7 +32,7 @@ pub(super) struct Enrichment {
 pub(super) struct Training {
     /// The region enriched [D50], the enrichment, the strain trained to.
     pub(super) slab: (f64, f64),
-    enrichment: Enrichment,
+    pub(super) enrichment: Enrichment,
     strain: f64,
     /// σ_xy [Pa] (magnitudes): the continuum's at the detection, the full DEM's at that strain.
     continuum: f64,
