@@ -52,14 +52,15 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawOracle>) -> Result<Option<Orac
             "fixed" => OracleKind::Fixed,
             "layered" => OracleKind::Layered,
             "surface" => OracleKind::Surface,
-            // Chen 2021's oracle exists as functions (grains_oracle::shear_band) and in
-            // `grains validate --part shear`, but nothing enriches a band yet.
+            // Chen 2021's hybrid exists as functions (grains_oracle::shear_band, band_epoch,
+            // grains_dem::training) and runs in process in `grains validate --part shear`;
+            // the runtime's oracle does not take it yet.
             "shear_band" => {
                 return Err(ctx.err(
                     Some(o.kind.span()),
                     Some("oracle.kind"),
-                    "\"shear_band\" (Chen 2021) is not built into runs yet: its detection runs in `grains validate --part shear`, \
-                     but no enrichment of a band into grains; use one of \"fixed\", \"layered\", \"surface\""
+                    "\"shear_band\" (Chen 2021) is not built into runs yet: its oracle, enrichment and training run in process in \
+                     `grains validate --part shear` only; use one of \"fixed\", \"layered\", \"surface\""
                         .into(),
                 ));
             }

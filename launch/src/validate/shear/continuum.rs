@@ -30,6 +30,8 @@ pub(super) struct ContinuumShear {
     /// τ/σ_yy against strain.
     pub(super) curve: Vec<(f64, f64)>,
     pub(super) wall: f64,
+    /// The wall time [s] from the start to the oracle's detection (before any enrichment).
+    pub(super) detection_wall: Option<f64>,
     /// Up to the detection: the mean velocity [vx, vy] of the points in each cell-high slab
     /// (from y = 0) every ORACLE_EVERY steps, with the time since the shear began [s].
     pub(super) history: Vec<(f64, Vec<[f64; 2]>)>,
@@ -336,7 +338,7 @@ pub(super) fn continuum_run(
     let coefficients = Coefficients::PLANAR_SHEAR;
     let mut recent = RecentStrain::default();
     let mut persistence = Persistence::default();
-    let mut detected = None;
+    let (mut detected, mut detection_wall) = (None, None);
     let (mut history, mut at_detection) = (Vec::new(), None);
     let (mut coupled, mut training): (Option<Coupled>, Option<Training>) = (None, None);
     // Settle under the load at rest, then shear.
@@ -446,6 +448,7 @@ pub(super) fn continuum_run(
             let lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             detected = Some((strain, lo, hi));
+            detection_wall = Some(t0.elapsed().as_secs_f64());
             let (mut sxy, mut vol) = (0.0, 0.0);
             for k in 0..pts.len() {
                 sxy += pts.tau[k].x_axis.y * pts.volume[k];
@@ -503,6 +506,7 @@ pub(super) fn continuum_run(
         detected,
         curve,
         wall: t0.elapsed().as_secs_f64(),
+        detection_wall,
         history,
         at_detection,
         hybrid: match coupled {

@@ -119,6 +119,7 @@ pub(super) fn large_planar_shear(
         Err(_) => (f64::NAN, f64::NAN),
     };
     let (peak, residual) = softening(&hybrid.curve);
+    let detection = hybrid.detection_wall.unwrap_or(f64::NAN);
     let _ = writeln!(
         md,
         "### §6.4: a large planar shear, cost\n\n§6.1's specimen {TIMES} times as tall ({:.0} × {:.0} D50), as Chen's large \
@@ -134,8 +135,8 @@ pub(super) fn large_planar_shear(
          | DEM, {TIMES} × §6.1 | {tall_grains} | | {dem_wall:.0} s (scaled) | | | | |\n\
          | continuum, {cell:.1}-D50 cells | | {} | {:.0} s | | | | |\n\
          | hybrid, `{}` | {grains} | {} | {:.0} s | {t_s:.1} D50 | {centre:.1} D50 | {:.3} ({:.2}) | {residual:.3} |\n\n\
-         Speed-up: **{measured:.1}×** (the DEM's {dem_wall:.0} s over the hybrid's {:.0} s, which includes its continuum up to \
-         the detection, the enrichment and the training). The grains span {lo:.0}–{hi:.0} D50 of {:.0} (T_D / T = \
+         Speed-up: **{measured:.1}×** (the DEM's {dem_wall:.0} s over the hybrid's {:.0} s: its continuum up to the detection \
+         {:.0} s, the enrichment and the training {:.0} s, the coupled run {:.0} s). The grains span {lo:.0}–{hi:.0} D50 of {:.0} (T_D / T = \
          {t_d_over_t:.3}). §6.4.1's model with the costs measured here: C_D = {c_d:.2e} s a grain and DEM step, C_C = \
          {c_c:.2e} s a cell and DEM step, N_D = {n_d:.1} grains a cell, so r = C_C / (C_D N_D) = {r:.3} (Chen: {:.4} for its \
          planar shear) and the predicted speed-up 1 / (T_D/T + (1 − T_D/T) r) = **{predicted:.1}×**. The model leaves out \
@@ -162,6 +163,9 @@ pub(super) fn large_planar_shear(
         peak.1,
         peak.0,
         hybrid.wall,
+        detection,
+        h.training.wall,
+        hybrid.wall - detection - h.training.wall,
         tall.height / d,
         4.87e-7 / (1.14e-6 * 58.0),
         1.0 / r,

@@ -40,7 +40,7 @@ pub(super) struct Training {
     /// [σxx, σyy, σxy] of the packing, compression positive: trained, and as cut.
     trained: [f64; 3],
     untrained: [f64; 3],
-    wall: f64,
+    pub(super) wall: f64,
 }
 
 /// Chen 2021 §4 and Fig. 13 on the planar shear. At the oracle's detection the continuum is
