@@ -100,8 +100,8 @@ pub(super) fn large_planar_shear(
     let d = dem.diameter;
     let tall = stretched(dem, TIMES);
     // The DEM's cost at the tall size: §6.1's measured shear scaled by the cost per step of
-    // the tall specimen over the small one's, both probed side by side. (The probe alone reads
-    // a resting packing, which rebuilds its neighbour lists less often than a sheared one.)
+    // the tall specimen over the small one's, probed in turns. (The probe alone reads a
+    // packing at rest, whose cost per step is not the sheared run's: only its ratio is used.)
     let [(small_grains, small_step), (tall_grains, tall_step)] = dem_step_costs(&dem.initial, dem.height, TIMES, dem.dt)?;
     let dem_wall = dem.shear_wall * tall_step / small_step;
     // The continuum alone on the tall specimen (its cost per cell), then the hybrid.
