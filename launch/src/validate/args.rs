@@ -59,7 +59,8 @@ impl PartName {
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct ValidateArgs {
-    /// The CI subset: aspect ratio 1 only.
+    /// The CI subset, each part in its quick form (e.g. the column at aspect ratio 1 only; with
+    /// `--part shear`: one sample, no cohesive run, no tall shear).
     #[arg(long)]
     pub quick: bool,
     /// Aspect ratios to run instead of the default set.
