@@ -1,5 +1,5 @@
-//! `[[rigid]]`: rigid spheropolygons (Jiang 2020 §3), 2D: a convex polygon swept by a disk of
-//! radius `radius`, of a material's density and contact law, free, fixed or scripted. They
+//! `[[rigid]]`: rigid spheropolygons (Jiang 2020 §3), 2D: a simple polygon, convex or not,
+//! swept by a disk of radius `radius`, of a material's density and contact law, free, fixed or scripted. They
 //! run in the DEM and meet its grains, walls and each other.
 
 use super::Material;
@@ -21,8 +21,8 @@ pub enum RigidMotion {
 pub struct Rigid {
     /// Index into the scene's materials (one with a `[material.dem]` table).
     pub material: usize,
-    /// The polygon, counter-clockwise and convex, in scene coordinates [m] (one vertex: a
-    /// disk; two: a rod with round ends).
+    /// The polygon, counter-clockwise and simple (convex or not), in scene coordinates [m]
+    /// (one vertex: a disk; two: a rod with round ends).
     pub vertices: Vec<[f64; 2]>,
     /// Sphero-radius [m], > 0: the contacts act within it.
     pub radius: f64,
@@ -88,7 +88,7 @@ fn rigid(ctx: &Ctx, dim: usize, r: &RawRigid, materials: &[Material], f: &dyn Fn
         ));
     };
     let radius = in_range(ctx, a, &f("radius"), Bound::Open(0.0), Bound::None)?;
-    if let Err(why) = check_polygon(&vertices) {
+    if let Err(why) = check_polygon(&vertices, radius) {
         return Err(ctx.err(Some(r.vertices.span()), Some(&f("vertices")), why));
     }
     let motion = match r.motion.as_ref().map(|m| (m, m.get_ref().as_str())) {
@@ -135,9 +135,12 @@ fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[1] - a[1] * b[0]
 }
 
-/// Why `vertices` cannot be a body's polygon, if it cannot: no vertex, a repeated vertex, not
-/// convex or not counter-clockwise.
-pub fn check_polygon(vertices: &[[f64; 2]]) -> Result<(), String> {
+/// Why `vertices` cannot be the polygon of a body of sphero-radius `radius`, if it cannot: no
+/// vertex, a repeated vertex, a vertex where the outline runs straight on or doubles back,
+/// wound clockwise, edges that cross, or (non-convex) two edges that are not neighbours
+/// closer than 2 `radius`: an arm or a notch that thin would make the swept shape overlap
+/// itself away from a corner, which neither its mass properties nor its contacts follow.
+pub fn check_polygon(vertices: &[[f64; 2]], radius: f64) -> Result<(), String> {
     let n = vertices.len();
     if n == 0 {
         return Err("a rigid body needs at least one vertex".into());
@@ -156,24 +159,58 @@ pub fn check_polygon(vertices: &[[f64; 2]]) -> Result<(), String> {
         if d(k) == [0.0; 2] {
             return Err(format!("vertices {k} and {} coincide", (k + 1) % n));
         }
-        if cross(d(k), d((k + 1) % n)) <= 0.0 {
+    }
+    for k in 0..n {
+        if cross(d(k), d((k + 1) % n)) == 0.0 {
             return Err(format!(
-                "the polygon must be convex with its vertices counter-clockwise; at vertex {} it turns clockwise or not at all",
+                "at vertex {} the outline runs straight on or doubles back; leave that vertex out",
                 (k + 1) % n
             ));
         }
     }
-    // Convex at every vertex but wound more than once (a star): the turns exceed 2π.
-    let turns: f64 = (0..n)
-        .map(|k| {
-            let (a, b) = (d(k), d((k + 1) % n));
-            cross(a, b).atan2(a[0] * b[0] + a[1] * b[1])
-        })
-        .sum();
-    if turns > 2.0 * std::f64::consts::PI + 1e-9 {
-        return Err("the polygon winds around more than once; give a simple convex one".into());
+    let edge = |k: usize| (vertices[k], vertices[(k + 1) % n]);
+    let pairs = || (0..n).flat_map(move |i| (i + 2..n).filter(move |&j| !(i == 0 && j == n - 1)).map(move |j| (i, j)));
+    if let Some((i, j)) = pairs().find(|&(i, j)| segment_gap(edge(i), edge(j)) == 0.0) {
+        return Err(format!(
+            "edges {i} and {j} cross: the polygon must be simple (convex or not), its outline going round once"
+        ));
+    }
+    let area2: f64 = (0..n).map(|k| cross(vertices[k], vertices[(k + 1) % n])).sum();
+    if area2 <= 0.0 {
+        return Err("the vertices must go counter-clockwise round the polygon; these go clockwise".into());
+    }
+    let convex = (0..n).all(|k| cross(d(k), d((k + 1) % n)) > 0.0);
+    if !convex
+        && let Some((i, j, gap)) = pairs()
+            .map(|(i, j)| (i, j, segment_gap(edge(i), edge(j))))
+            .find(|p| p.2 < 2.0 * radius)
+    {
+        return Err(format!(
+            "edges {i} and {j} are {gap:e} m apart, less than twice the sphero-radius ({:e} m): \
+             make that arm or notch wider, or the radius smaller",
+            2.0 * radius
+        ));
     }
     Ok(())
+}
+
+/// Distance between two segments (0 where they cross or touch).
+fn segment_gap(p: ([f64; 2], [f64; 2]), q: ([f64; 2], [f64; 2])) -> f64 {
+    let sub = |a: [f64; 2], b: [f64; 2]| [a[0] - b[0], a[1] - b[1]];
+    let side = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| cross(sub(b, a), sub(c, a)).signum();
+    if side(p.0, p.1, q.0) * side(p.0, p.1, q.1) <= 0.0 && side(q.0, q.1, p.0) * side(q.0, q.1, p.1) <= 0.0 {
+        return 0.0;
+    }
+    let to_segment = |x: [f64; 2], (a, b): ([f64; 2], [f64; 2])| {
+        let (e, w) = (sub(b, a), sub(x, a));
+        let t = ((w[0] * e[0] + w[1] * e[1]) / (e[0] * e[0] + e[1] * e[1])).clamp(0.0, 1.0);
+        let r = [w[0] - t * e[0], w[1] - t * e[1]];
+        (r[0] * r[0] + r[1] * r[1]).sqrt()
+    };
+    to_segment(p.0, q)
+        .min(to_segment(p.1, q))
+        .min(to_segment(q.0, p))
+        .min(to_segment(q.1, p))
 }
 
 #[cfg(test)]
@@ -184,17 +221,37 @@ mod tests {
     const SQUARE: &str =
         "\n[[rigid]]\nmaterial = \"glass\"\nvertices = [[0.0, 0.0], [0.01, 0.0], [0.01, 0.01], [0.0, 0.01]]\nradius = 0.0005\n";
 
+    /// Convex and non-convex simple polygons pass; clockwise, crossing (a pentagram, a bow
+    /// tie), straight-on or doubled-back vertices, and non-convex arms thinner than 2a do not.
     #[test]
     fn polygons_are_checked() {
+        let a = 0.01;
         let sq = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
-        assert!(check_polygon(&sq).is_ok() && check_polygon(&sq[..1]).is_ok() && check_polygon(&sq[..2]).is_ok());
+        assert!(check_polygon(&sq, a).is_ok() && check_polygon(&sq[..1], a).is_ok() && check_polygon(&sq[..2], a).is_ok());
         let clockwise: Vec<_> = sq.iter().rev().copied().collect();
-        assert!(check_polygon(&clockwise).unwrap_err().contains("counter-clockwise"));
+        assert!(check_polygon(&clockwise, a).unwrap_err().contains("counter-clockwise"));
         let dart = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.3], [1.0, 2.0]];
-        assert!(check_polygon(&dart).is_err());
+        assert!(check_polygon(&dart, a).is_ok());
         let star = [[0.0, 1.0], [-0.59, -0.81], [0.95, 0.31], [-0.95, 0.31], [0.59, -0.81]];
-        assert!(check_polygon(&star).unwrap_err().contains("more than once"));
-        assert!(check_polygon(&[]).is_err() && check_polygon(&[[1.0, 0.0], [1.0, 0.0]]).is_err());
+        assert!(check_polygon(&star, a).unwrap_err().contains("cross"));
+        let bow_tie = [[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]];
+        assert!(check_polygon(&bow_tie, a).unwrap_err().contains("cross"));
+        let straight = [[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.0, 1.0]];
+        assert!(check_polygon(&straight, a).unwrap_err().contains("vertex 1"));
+        // A U: arms 0.2 wide round a notch 0.6 wide, fine at a = 0.05, not at a = 0.15.
+        let u = [
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [1.0, 1.0],
+            [0.8, 1.0],
+            [0.8, 0.2],
+            [0.2, 0.2],
+            [0.2, 1.0],
+            [0.0, 1.0],
+        ];
+        assert!(check_polygon(&u, 0.05).is_ok());
+        assert!(check_polygon(&u, 0.15).unwrap_err().contains("wider"));
+        assert!(check_polygon(&[], a).is_err() && check_polygon(&[[1.0, 0.0], [1.0, 0.0]], a).is_err());
     }
 
     #[test]
@@ -203,7 +260,11 @@ mod tests {
         let scene = super::super::from_str(&ok, std::path::Path::new("t.toml"), 0).unwrap();
         assert_eq!(scene.rigids.len(), 1);
         assert_eq!((scene.rigids[0].radius, scene.rigids[0].motion), (0.0005, super::RigidMotion::Free));
-        let text = edit(&ok, "[0.01, 0.01], [0.0, 0.01]", "[0.0, 0.01], [0.01, 0.01]");
+        let text = edit(
+            &ok,
+            "[0.01, 0.0], [0.01, 0.01], [0.0, 0.01]",
+            "[0.0, 0.01], [0.01, 0.01], [0.01, 0.0]",
+        );
         check_err(
             &text,
             Some(line_of(&text, "vertices = [[0.0")),

@@ -27,8 +27,9 @@ use std::path::{Path, PathBuf};
 
 /// Version of the layout (header, manifest, and the built-in payloads).
 /// 2: the DEM's state and pipeline carry rigid bodies and their contacts; 3: the DEM carries
-/// its bodies' contacts with material points.
-pub const FORMAT: u32 = 3;
+/// its bodies' contacts with material points; 4: a body's contact keys name the part of the
+/// outline touched (non-convex bodies).
+pub const FORMAT: u32 = 4;
 const MAGIC: [u8; 8] = *b"GRAINSCP";
 /// magic, format, role code, scene hash, step, payload length, payload checksum.
 const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 8 + 8;

@@ -1,5 +1,6 @@
-//! Rigid spheropolygons in 2D (Jiang 2020 §3, after Alonso-Marroquín 2008): a convex polygon
-//! swept by a disk of radius `a` (their Minkowski sum, eq. 37), moving as one rigid body.
+//! Rigid spheropolygons in 2D (Jiang 2020 §3, after Alonso-Marroquín 2008): a simple polygon,
+//! convex or not, swept by a disk of radius `a` (their Minkowski sum, eq. 37), moving as one
+//! rigid body.
 //!
 //! Contacts are vertex–edge (eqs. 38–43): a vertex V of one body touches another body where its
 //! distance d to the nearest point Y of the other's polygon is under a_i + a_j; the overlap is
@@ -7,11 +8,19 @@
 //! p = V − (a_i − ξ/2) N (eq. 41), with the torques about both centres of mass (eq. 40). The law
 //! is the grains' ([`contact_force`]: spring–dashpot, tangential anchor spring, Coulomb cap).
 //!
-//! - One contact per vertex and body it touches: the vertex against the nearest point of the
-//!   other polygon (an edge, or an end of one), so a vertex near a corner is not counted once
-//!   per edge. Of the two passes of a pair (i's vertices on j, j's on i), the second leaves out
-//!   touches whose nearest point is a vertex of i: a vertex–vertex touch is then counted once
-//!   (V_j within reach of V_i puts V_i within reach of j, so the first pass has it).
+//! - Against a convex polygon, one contact per vertex and body it touches: the vertex against
+//!   the nearest point of the other polygon (an edge, or an end of one), so a vertex near a
+//!   corner is not counted once per edge. Of the two passes of a pair (i's vertices on j, j's
+//!   on i), the second leaves out touches whose nearest point is a vertex of i: a
+//!   vertex–vertex touch is then counted once (V_j within reach of V_i puts V_i within reach
+//!   of j, so the first pass has it).
+//! - Against a non-convex polygon, one contact per part of its outline the vertex touches
+//!   ([`touching`]: each edge it faces, each convex corner whose region holds it), so a vertex
+//!   in a notch meets both its sides, as eq. 39's sum over vertex–edge pairs has it. A reflex
+//!   vertex touches nothing itself: whatever reaches it from outside meets one of its edges
+//!   first, and is counted there. The history of a contact is kept per part (a vertex
+//!   sliding round a corner of a non-convex body starts a new tangential spring), and a bond
+//!   to a non-convex body holds only while the two touch.
 //! - A grain meets a body as a one-vertex body of its radius; so does, in the coupling with
 //!   the MPM (Jiang 2020 §4), a material point of contact radius r_p.
 //! - The damping takes the contact's effective mass along N, 1 / (Σ 1/m + (r × N)²/I) over
@@ -30,7 +39,7 @@ use crate::contact::{ContactParams, ContactState, contact_force};
 use crate::space::D2;
 use crate::state::{Wall, WallShape};
 use glam::DVec2;
-pub use grains_grid::polygon::{Near, near};
+pub use grains_grid::polygon::{Near, is_reflex, near, touching};
 
 /// How a body moves.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -73,7 +82,7 @@ pub struct Body {
     pub external_torque: f64,
 }
 
-/// Area, centroid and polar second moment (about the centroid, per unit density) of a convex
+/// Area, centroid and polar second moment (about the centroid, per unit density) of a
 /// spheropolygon.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MassProperties {
@@ -92,10 +101,12 @@ fn spin_cross(omega: f64, r: DVec2) -> DVec2 {
     DVec2::new(-omega * r.y, omega * r.x)
 }
 
-/// The mass properties of the polygon `vertices` (convex, counter-clockwise) swept by a disk
-/// of radius `a`, exactly: the polygon, a rectangle of width a outside each edge, and at each
-/// vertex a circular sector of radius a spanning the turn between its edges' normals (the
-/// turns sum to 2π).
+/// The mass properties of the polygon `vertices` (simple, counter-clockwise) swept by a disk
+/// of radius `a`, exactly: the polygon, a rectangle of width a outside each edge, at each
+/// convex vertex a circular sector of radius a spanning the turn between its edges' normals,
+/// less at each reflex vertex the kite where its two edges' rectangles overlap. Exact while
+/// the rectangles meet nowhere else: no part of the polygon, and no gap between two of its
+/// parts, narrower than 2a.
 pub fn mass_properties(vertices: &[DVec2], a: f64) -> MassProperties {
     let n = vertices.len();
     // Accumulated about the origin: area, first moment, second moment.
@@ -138,8 +149,19 @@ pub fn mass_properties(vertices: &[DVec2], a: f64) -> MassProperties {
             (2.0 * std::f64::consts::PI, DVec2::X)
         } else {
             let (before, after) = (normal((k + edges - 1) % edges), normal(k % edges));
-            let turn = cross(before, after).atan2(before.dot(after)).rem_euclid(2.0 * std::f64::consts::PI);
-            let turn = if turn == 0.0 && n == 2 { std::f64::consts::PI } else { turn };
+            let turn = cross(before, after).atan2(before.dot(after));
+            // A rod's ends turn by π (its two normals are opposite).
+            let turn = if n == 2 { std::f64::consts::PI } else { turn };
+            if turn < 0.0 {
+                // A reflex vertex: the rectangles outside its two edges overlap in the kite
+                // V, V + a N_before, P, V + a N_after, P where the offset edges cross.
+                let far = vertex + (before + after) * (a / (1.0 + before.dot(after)));
+                for (p, q) in [(vertex + before * a, far), (far, vertex + after * a)] {
+                    let (w, c, own) = triangle(vertex, p, q);
+                    add(-w.abs(), c, -own.abs());
+                }
+                continue;
+            }
             let b = before + after;
             (
                 turn,
@@ -166,8 +188,17 @@ pub fn mass_properties(vertices: &[DVec2], a: f64) -> MassProperties {
     }
 }
 
+/// Area, centroid and second moment about the centroid of the triangle p q r (signed:
+/// negative clockwise).
+fn triangle(p: DVec2, q: DVec2, r: DVec2) -> (f64, DVec2, f64) {
+    let w = 0.5 * cross(q - p, r - p);
+    let c = (p + q + r) / 3.0;
+    let about_origin = w * (p.length_squared() + q.length_squared() + r.length_squared() + p.dot(q) + q.dot(r) + r.dot(p)) / 6.0;
+    (w, c, about_origin - w * c.length_squared())
+}
+
 impl Body {
-    /// A body of the polygon `vertices` (scene coordinates, convex, counter-clockwise: the
+    /// A body of the polygon `vertices` (scene coordinates, simple, counter-clockwise: the
     /// scene checks it) swept by `radius`, of `density` [kg/m²], at rest (or moving as
     /// scripted).
     pub fn new(id: u64, vertices: &[DVec2], radius: f64, density: f64, material: u32, motion: Motion) -> Body {
@@ -208,8 +239,9 @@ impl Body {
     }
 
     /// The outline of the swept shape where the body is now, counter-clockwise: each edge
-    /// moved out by a, and `per_arc` segments on the arc of radius a around each vertex (a
-    /// disk: 4 `per_arc` segments).
+    /// moved out by a, and `per_arc` segments on the arc of radius a around each convex
+    /// vertex (a disk: 4 `per_arc` segments); at a reflex vertex the point where its two
+    /// moved edges cross.
     pub fn outline(&self, per_arc: usize) -> Vec<DVec2> {
         let poly = self.vertices();
         let n = poly.len();
@@ -225,7 +257,12 @@ impl Body {
                 2 => (normal((k + 1) % 2).to_angle(), std::f64::consts::PI),
                 _ => {
                     let (a, b) = (normal((k + n - 1) % n), normal(k));
-                    (a.to_angle(), cross(a, b).atan2(a.dot(b)))
+                    let turn = cross(a, b).atan2(a.dot(b));
+                    if turn < 0.0 {
+                        out.push(vertex + (a + b) * (self.radius / (1.0 + a.dot(b))));
+                        continue;
+                    }
+                    (a.to_angle(), turn)
                 }
             };
             let steps = if n == 1 { 4 * per_arc } else { per_arc };
@@ -274,14 +311,15 @@ pub struct Side {
 }
 
 /// What a contact is between, for its history: a body's vertex and a body, a grain or a
-/// material point (by id) and a body, or a body's vertex and a wall (walls and grains are vertex `u32::MAX` where
-/// they have none).
+/// material point (by id) and a body, or a body's vertex and a wall (a segment wall's ends
+/// are vertices `u32::MAX` and `u32::MAX − 1`); `feature` is the part of the other body's
+/// outline touched ([`touching`]: 0 on a convex body, which has one).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
 pub enum Key {
-    Bodies { of: u64, vertex: u32, on: u64 },
-    Grain { grain: u64, body: u64 },
-    Point { point: u64, body: u64 },
-    Wall { body: u64, vertex: u32, wall: u32 },
+    Bodies { of: u64, vertex: u32, on: u64, feature: u32 },
+    Grain { grain: u64, body: u64, feature: u32 },
+    Point { point: u64, body: u64, feature: u32 },
+    Wall { body: u64, vertex: u32, wall: u32, feature: u32 },
 }
 
 /// The contacts of the last evaluation with their tangential springs, sorted by key (the
@@ -383,32 +421,37 @@ pub fn forces(
                 continue;
             }
             for (s, o, first) in [(i, j, true), (j, i, false)] {
+                let (a_s, a_o) = (bodies[s].radius, bodies[o].radius);
                 for (k, &v) in polys[s].iter().enumerate() {
-                    let at = near(&polys[o], v);
-                    // A vertex–vertex touch once: in the first pass, and only between two
-                    // vertices each nearest to the other (else the other's vertex touches
-                    // this body's edge, and the second pass has it).
-                    if let Some(w) = at.vertex
-                        && (!first || near(&polys[s], polys[o][w]).vertex != Some(k))
-                    {
+                    if is_reflex(&polys[s], k) {
                         continue;
                     }
-                    let key = Key::Bodies {
-                        of: bodies[s].id,
-                        vertex: k as u32,
-                        on: bodies[o].id,
-                    };
-                    let mut state = history(&key);
-                    let (a_s, a_o) = (bodies[s].radius, bodies[o].radius);
-                    if let Some(t) = touch(&law, v, a_s, &sides[s], at.normal, at.gap, a_o, &sides[o], 1.0, dt, &mut state) {
-                        apply(&mut load, s, t.force, t.point);
-                        apply(&mut load, o, -t.force, t.point);
-                        list.push((key, state));
-                    }
+                    touching(&polys[o], v, a_s + a_o, |feature, at| {
+                        // A vertex–vertex touch once: in the first pass, and only between two
+                        // vertices each touching the other (else the other's vertex touches
+                        // this body's edge, and the second pass has it).
+                        if let Some(w) = at.vertex
+                            && (!first || !touches_vertex(&polys[s], k, polys[o][w], a_s + a_o))
+                        {
+                            return;
+                        }
+                        let key = Key::Bodies {
+                            of: bodies[s].id,
+                            vertex: k as u32,
+                            on: bodies[o].id,
+                            feature,
+                        };
+                        let mut state = history(&key);
+                        if let Some(t) = touch(&law, v, a_s, &sides[s], at.normal, at.gap, a_o, &sides[o], 1.0, dt, &mut state) {
+                            apply(&mut load, s, t.force, t.point);
+                            apply(&mut load, o, -t.force, t.point);
+                            list.push((key, state));
+                        }
+                    });
                 }
             }
         }
-        let grain_key = |grain, body| Key::Grain { grain, body };
+        let grain_key = |grain, body, feature| Key::Grain { grain, body, feature };
         on_grains.extend(disk_contacts(
             i,
             &bodies[i],
@@ -434,11 +477,21 @@ pub fn forces(
                 inv_inertia: 0.0,
             };
             let a = bodies[i].radius;
-            let at = |load: &mut Vec<(DVec2, f64)>, list: &mut Vec<_>, k: u32, v: DVec2, normal: DVec2, gap: f64, o: Side, mine: bool| {
+            #[allow(clippy::too_many_arguments)]
+            let at = |load: &mut Vec<(DVec2, f64)>,
+                      list: &mut Vec<_>,
+                      k: u32,
+                      feature: u32,
+                      v: DVec2,
+                      normal: DVec2,
+                      gap: f64,
+                      o: Side,
+                      mine: bool| {
                 let key = Key::Wall {
                     body: bodies[i].id,
                     vertex: k,
                     wall: w as u32,
+                    feature,
                 };
                 let mut state = history(&key);
                 // The body's vertex on the wall, or the wall's end (a vertex of radius 0) on
@@ -453,37 +506,50 @@ pub fn forces(
                     list.push((key, state));
                 }
             };
+            // A reflex vertex is never the first to reach a wall: the convex ones around it are.
+            let vertices = || polys[i].iter().enumerate().filter(|&(k, _)| !is_reflex(&polys[i], k));
             match wall.shape {
                 WallShape::Plane { point, normal } => {
                     // Signed: a vertex pushed past the plane is pushed back, not through.
-                    for (k, &v) in polys[i].iter().enumerate() {
+                    for (k, &v) in vertices() {
                         let gap = (v - point).dot(normal);
-                        at(&mut load, &mut list, k as u32, v, normal, gap, wall_side(point, 0.0), true);
+                        at(&mut load, &mut list, k as u32, 0, v, normal, gap, wall_side(point, 0.0), true);
                     }
                 }
                 WallShape::Drum { center, radius } => {
-                    for (k, &v) in polys[i].iter().enumerate() {
+                    for (k, &v) in vertices() {
                         let r = v - center;
                         let len = r.length();
                         if len > 0.0 {
                             let (normal, gap) = (-r / len, radius - len);
-                            at(&mut load, &mut list, k as u32, v, normal, gap, wall_side(center, wall.spin), true);
+                            at(
+                                &mut load,
+                                &mut list,
+                                k as u32,
+                                0,
+                                v,
+                                normal,
+                                gap,
+                                wall_side(center, wall.spin),
+                                true,
+                            );
                         }
                     }
                 }
                 WallShape::Segment { a: p, b: q } => {
                     let seg = [p, q];
-                    for (k, &v) in polys[i].iter().enumerate() {
+                    for (k, &v) in vertices() {
                         let on = near(&seg, v);
-                        at(&mut load, &mut list, k as u32, v, on.normal, on.gap, wall_side(p, 0.0), true);
+                        at(&mut load, &mut list, k as u32, 0, v, on.normal, on.gap, wall_side(p, 0.0), true);
                     }
                     // The segment's ends against the body's edges (on its vertices: above).
                     for (e, &end) in seg.iter().enumerate() {
-                        let on = near(&polys[i], end);
-                        if on.vertex.is_none() {
-                            let k = u32::MAX - e as u32;
-                            at(&mut load, &mut list, k, end, on.normal, on.gap, wall_side(p, 0.0), false);
-                        }
+                        touching(&polys[i], end, a, |feature, on| {
+                            if on.vertex.is_none() {
+                                let k = u32::MAX - e as u32;
+                                at(&mut load, &mut list, k, feature, end, on.normal, on.gap, wall_side(p, 0.0), false);
+                            }
+                        });
                     }
                 }
             }
@@ -496,6 +562,13 @@ pub fn forces(
     list.sort_unstable_by_key(|e| e.0);
     contacts.list = list;
     on_grains
+}
+
+/// Whether `p`, within `reach` of the polygon `poly`, touches its vertex `k` ([`touching`]).
+fn touches_vertex(poly: &[DVec2], k: usize, p: DVec2, reach: f64) -> bool {
+    let mut found = false;
+    touching(poly, p, reach, |_, at| found |= at.vertex == Some(k));
+    found
 }
 
 /// For each body, the disks within its reach ([`Body::reach`]), by the broad phase.
@@ -518,7 +591,7 @@ fn disk_contacts(
     law: &ContactParams,
     disks: &[GrainView],
     candidates: &[usize],
-    key: impl Fn(u64, u64) -> Key,
+    key: impl Fn(u64, u64, u32) -> Key,
     dt: f64,
     history: &impl Fn(&Key) -> ContactState<DVec2>,
     list: &mut Vec<(Key, ContactState<DVec2>)>,
@@ -526,9 +599,6 @@ fn disk_contacts(
 ) -> Vec<(usize, DVec2, f64)> {
     let mut out = Vec::new();
     for disk in candidates.iter().map(|&k| &disks[k]) {
-        let at = near(poly, disk.x);
-        let k = key(disk.id, body.id);
-        let mut state = history(&k);
         let s = Side {
             x: disk.x,
             v: disk.v,
@@ -536,24 +606,28 @@ fn disk_contacts(
             inv_mass: disk.inv_mass,
             inv_inertia: 0.0,
         };
-        if let Some(t) = touch(
-            law,
-            disk.x,
-            disk.radius,
-            &s,
-            at.normal,
-            at.gap,
-            body.radius,
-            side,
-            disk.scale,
-            dt,
-            &mut state,
-        ) {
-            load[i].0 -= t.force;
-            load[i].1 -= cross(t.point - side.x, t.force);
-            out.push((disk.index, t.force, cross(t.point - disk.x, t.force)));
-            list.push((k, state));
-        }
+        touching(poly, disk.x, disk.radius + body.radius, |feature, at| {
+            let k = key(disk.id, body.id, feature);
+            let mut state = history(&k);
+            if let Some(t) = touch(
+                law,
+                disk.x,
+                disk.radius,
+                &s,
+                at.normal,
+                at.gap,
+                body.radius,
+                side,
+                disk.scale,
+                dt,
+                &mut state,
+            ) {
+                load[i].0 -= t.force;
+                load[i].1 -= cross(t.point - side.x, t.force);
+                out.push((disk.index, t.force, cross(t.point - disk.x, t.force)));
+                list.push((k, state));
+            }
+        });
     }
     out
 }
@@ -579,7 +653,7 @@ pub fn point_forces(
     for (i, body) in bodies.iter().enumerate() {
         let (poly, side) = (body.vertices(), body.side());
         let law = materials[body.material as usize];
-        let key = |point, body| Key::Point { point, body };
+        let key = |point, body, feature| Key::Point { point, body, feature };
         let touched = disk_contacts(
             i,
             body,
@@ -675,6 +749,78 @@ mod tests {
             "{} vs {expected}",
             rounded.second_moment
         );
+    }
+
+    /// A non-convex spheropolygon (an L with a reflex corner, and a V-notched block) against
+    /// the swept shape integrated on a fine grid (points within a of the polygon or inside
+    /// it): area, centroid and second moment to the grid's error; with a = 0 the L against
+    /// its two rectangles in closed form.
+    #[test]
+    fn mass_properties_of_a_non_convex_shape_match_integration() {
+        let l = [
+            DVec2::ZERO,
+            DVec2::new(2.0, 0.0),
+            DVec2::new(2.0, 0.5),
+            DVec2::new(0.5, 0.5),
+            DVec2::new(0.5, 1.5),
+            DVec2::new(0.0, 1.5),
+        ];
+        let bare = mass_properties(&l, 0.0);
+        // The foot 2 × 0.5 and the upright 0.5 × 1 above it.
+        let parts = [
+            (1.0, DVec2::new(1.0, 0.25), (4.0 + 0.25) / 12.0),
+            (0.5, DVec2::new(0.25, 1.0), 0.5 * (0.25 + 1.0) / 12.0),
+        ];
+        let area: f64 = parts.iter().map(|p| p.0).sum();
+        let c = parts.iter().fold(DVec2::ZERO, |s, p| s + p.1 * p.0) / area;
+        let j: f64 = parts.iter().map(|p| p.2 + p.0 * (p.1 - c).length_squared()).sum();
+        assert!((bare.area - area).abs() < 1e-12 && (bare.centroid - c).length() < 1e-12 && (bare.second_moment - j).abs() < 1e-12);
+        let notch = [
+            DVec2::new(-2.0, -1.0),
+            DVec2::new(2.0, -1.0),
+            DVec2::new(2.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, -0.577),
+            DVec2::new(-1.0, 0.0),
+            DVec2::new(-2.0, 0.0),
+        ];
+        for (poly, a) in [(&l[..], 0.2), (&notch[..], 0.1)] {
+            let exact = mass_properties(poly, a);
+            let h = 2e-3;
+            let (mut m, mut first, mut second) = (0.0, DVec2::ZERO, 0.0);
+            for i in -1300..1300 {
+                for k in -800..1100 {
+                    let p = DVec2::new((i as f64 + 0.5) * h, (k as f64 + 0.5) * h);
+                    if near(poly, p).gap < a {
+                        m += h * h;
+                        first += p * h * h;
+                        second += p.length_squared() * h * h;
+                    }
+                }
+            }
+            let centroid = first / m;
+            let moment = second - m * centroid.length_squared();
+            assert!((exact.area - m).abs() < 2e-4 * m, "area {} vs {m}", exact.area);
+            assert!(
+                (exact.centroid - centroid).length() < 1e-4,
+                "centroid {} vs {centroid}",
+                exact.centroid
+            );
+            assert!(
+                (exact.second_moment - moment).abs() < 5e-4 * moment,
+                "moment {} vs {moment}",
+                exact.second_moment
+            );
+            // The outline's polygon (the miter at the reflex corner) has the same area.
+            let body = Body::new(0, poly, a, 1.0, 0, Motion::Free);
+            let o = body.outline(256);
+            let outline: f64 = (0..o.len()).map(|k| 0.5 * cross(o[k], o[(k + 1) % o.len()])).sum();
+            assert!(
+                (outline - exact.area).abs() < 1e-4 * exact.area,
+                "outline {outline} vs {}",
+                exact.area
+            );
+        }
     }
 
     /// The outline's polygon has the swept shape's area to the arcs' chord error.

@@ -234,3 +234,153 @@ fn an_oblique_impact_with_friction_spins_the_body_by_the_friction_impulse() {
     let spin = -mu * jn * m * r / inertia;
     assert_close(b.omega, spin, 0.02 * spin.abs(), "spin from the friction's torque");
 }
+
+/// An L of foot `w` × `t` and upright `t` × `h`, its outer corner at `at` (counter-clockwise;
+/// the reflex corner at `at` + (t, t)).
+fn ell(at: DVec2, w: f64, t: f64, h: f64) -> Vec<DVec2> {
+    [(0.0, 0.0), (w, 0.0), (w, t), (t, t), (t, h), (0.0, h)]
+        .iter()
+        .map(|&(x, y)| at + DVec2::new(x, y))
+        .collect()
+}
+
+/// A fixed block 40 × 10 mm with a V notch cut in its top: faces at `beta` to the
+/// horizontal, 20 mm across, the apex (reflex) on x = 0.
+fn notched(beta: f64) -> Body {
+    let depth = 0.01 * beta.tan();
+    let v = [
+        (-0.02, -0.01),
+        (0.02, -0.01),
+        (0.02, 0.0),
+        (0.01, 0.0),
+        (0.0, -depth),
+        (-0.01, 0.0),
+        (-0.02, 0.0),
+    ];
+    let v: Vec<DVec2> = v.iter().map(|&(x, y)| DVec2::new(x, y)).collect();
+    Body::new(9, &v, 5e-4, DENSITY, 0, Motion::Fixed)
+}
+
+/// A non-convex body (an L, its centre of mass off its outline's middle, its reflex corner
+/// never touching the floor) at rest on a floor: the floor carries its weight to 0.1%, on a
+/// plane wall and on a fixed body.
+#[test]
+fn an_l_at_rest_on_a_floor_weighs_its_weight() {
+    let g = DVec2::new(0.0, -9.81);
+    let a = 0.0005;
+    for floor in ["plane", "body"] {
+        let l = Body::new(
+            0,
+            &ell(DVec2::new(-0.01, a + 1e-4), 0.02, 0.005, 0.015),
+            a,
+            DENSITY,
+            0,
+            Motion::Free,
+        );
+        let weight = l.mass * 9.81;
+        let (bodies, walls) = match floor {
+            "plane" => (vec![l], vec![Wall::plane(DVec2::ZERO, DVec2::Y, 0.5)]),
+            _ => (vec![l, slab(1, 0.0)], Vec::new()),
+        };
+        let mut st = state(law(KN, 0.3, 0.5), g, bodies, walls);
+        run(&mut st, 2e-6, 0.2);
+        let b = &st.bodies[0];
+        eprintln!("{floor}: the floor carries {} N of the L's {weight} N", b.force.y);
+        assert_close(b.force.y, weight, 1e-3 * weight, &format!("{floor}: the floor's force on the L"));
+        assert!(b.v.length() < 1e-6 && b.omega.abs() < 1e-4, "{floor}: at rest: {} {}", b.v, b.omega);
+    }
+}
+
+/// A disk in a frictionless V notch (faces at β = 30° to the horizontal, the apex a reflex
+/// vertex) rests on both faces at once, as a grain and as a one-vertex body: each face
+/// pushes with N = m g / (2 cos β) along its normal, so its overlap is ξ = N / k_n and its
+/// centre sits (r + a − ξ) / cos β above the apex, on the notch's axis. Touching one face
+/// only it would slide down that face past the apex; counting a face twice would halve ξ.
+#[test]
+fn a_disk_in_a_notch_rests_on_both_faces() {
+    let beta = 30f64.to_radians();
+    let g = DVec2::new(0.0, -9.81);
+    let (r, a) = (0.002, 5e-4);
+    let apex = DVec2::new(0.0, -0.01 * beta.tan());
+    for kind in ["grain", "body"] {
+        let start = apex + DVec2::new(0.0, (r + a) / beta.cos() + 2e-4);
+        let (mut st, m) = if kind == "grain" {
+            let mut st = state(law(KN, 0.3, 0.0), g, vec![notched(beta)], Vec::new());
+            let m = Grains::<D2>::mass_of(r, DENSITY);
+            st.grains.push(7, start, r, m, 0);
+            (st, m)
+        } else {
+            // A disk body of radius r + a in all (its sphero-radius), on the notch's a.
+            let disk = Body::new(0, &[start], r, DENSITY, 0, Motion::Free);
+            let m = disk.mass;
+            (state(law(KN, 0.3, 0.0), g, vec![disk, notched(beta)], Vec::new()), m)
+        };
+        run(&mut st, 1e-6, 0.1);
+        let (x, v) = if kind == "grain" {
+            (st.grains.x[0], st.grains.v[0])
+        } else {
+            (st.bodies[0].x, st.bodies[0].v)
+        };
+        let xi = m * 9.81 / (2.0 * beta.cos() * KN);
+        let height = (r + a - xi) / beta.cos();
+        eprintln!(
+            "{kind}: {:.6} mm above the apex, expected {:.6} (ξ = {:.3e} m); x = {:.2e} m",
+            (x.y - apex.y) * 1e3,
+            height * 1e3,
+            xi,
+            x.x
+        );
+        assert!(v.length() < 1e-6, "{kind}: at rest: {v}");
+        assert!(x.x.abs() < 1e-9, "{kind}: on the axis: {}", x.x);
+        assert_close(
+            x.y - apex.y,
+            height,
+            0.02 * xi / beta.cos(),
+            &format!("{kind}: height above the apex"),
+        );
+        let notch = st.bodies.iter().find(|b| b.id == 9).unwrap();
+        assert_close(
+            notch.force.y,
+            -m * 9.81,
+            1e-3 * m * 9.81,
+            &format!("{kind}: the load on the notched block"),
+        );
+    }
+}
+
+/// A disk body hits the inner face of a free L's upright (the face beside its reflex
+/// corner), frictionless, e = 0.5, 4 mm above the L's centre of mass: the normal impulse of
+/// a rigid-body impact J = (1 + e) v / (1/m_A + 1/m_B + (r_B × N)² / I_B), with the L's mass,
+/// centre and moment of inertia from its non-convex swept shape, turns it by (r_B × J) / I_B.
+#[test]
+fn a_hit_on_an_l_s_inner_face_turns_it_by_the_impulse_s_torque() {
+    let (e, a, r) = (0.5, 5e-4, 0.002);
+    let shape = ell(DVec2::new(-0.0025, -0.01), 0.02, 0.005, 0.03);
+    let target = Body::new(1, &shape, a, DENSITY, 0, Motion::Free);
+    // The inner face is x = 0.0025 (swept out by a), from y = −0.005 to 0.02; the contact's
+    // arm on B from its centre of mass.
+    let y = target.x.y + 0.004;
+    let arm = DVec2::new(0.0025 + a, y) - target.x;
+    let mut hit = Body::new(0, &[DVec2::new(0.012, y)], r, DENSITY, 0, Motion::Free);
+    hit.v = DVec2::new(-1.0, 0.0);
+    let mut st = state(law(KN, e, 0.0), DVec2::ZERO, vec![hit, target], Vec::new());
+    run(&mut st, 1e-7, 0.008);
+    let (a_after, b) = (&st.bodies[0], &st.bodies[1]);
+    let (ma, mb, ib) = (a_after.mass, b.mass, b.inertia);
+    // N = −x (from A into B): r_B × N = r_x · 0 − r_y · (−1) = r_y.
+    let cross = arm.y;
+    let j = (1.0 + e) * 1.0 / (1.0 / ma + 1.0 / mb + cross * cross / ib);
+    assert_close(a_after.v.x, -1.0 + j / ma, 3e-3, "A's velocity");
+    assert_close(b.v.x, -j / mb, 3e-3, "B's velocity");
+    // The impulse on B is −x at r_B: ω_B = (r_B × (−J x̂)) / I_B = r_y J / I_B.
+    let expected = arm.y * j / ib;
+    eprintln!(
+        "A {} m/s (expected {}), B {} m/s (expected {}), B's spin {} rad/s (expected {expected})",
+        a_after.v.x,
+        -1.0 + j / ma,
+        b.v.x,
+        -j / mb,
+        b.omega
+    );
+    assert_close(b.omega, expected, 0.01 * expected.abs(), "B's spin");
+}

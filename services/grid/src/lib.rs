@@ -9,7 +9,8 @@
 //!   grains, the oracle), and the inertial number of a rate (the oracle, the MPM's μ(I));
 //! - [`homogenize`]: the grains' stress on the grid from their contacts (Yue 2018 Alg. 11),
 //!   computed by the DEM for the oracle's new material points;
-//! - [`polygon`]: where a point is against a convex polygon (nearest point, signed distance);
+//! - [`polygon`]: where a point is against a simple polygon, convex or not (nearest point,
+//!   signed distance, the faces and corners a disk touches);
 //! - [`reach`]: which disks lie within reach of which circles (the rigid bodies' broad phase,
 //!   for the DEM's grains and the MPM's contact points alike);
 //! - [`rng`]: seeded SplitMix64 randomness and the polydisperse radius draw, for the DEM's
