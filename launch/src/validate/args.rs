@@ -93,6 +93,12 @@ pub struct ValidateArgs {
     /// runouts averaged over them. Default 3, `--quick` 1.
     #[arg(long)]
     pub packings: Option<u64>,
+    /// The grains' transfers back that `--part shear`'s hybrid runs, one run each on every DEM
+    /// sample: `pic` (Yue 2018 Alg. 5–6 as written), `flip` (ours), `points:B` (Yue 2018 §3.7
+    /// as its text reads: FLIP share B of the grid's velocity change, PIC the rest, moving from
+    /// the saved position; spin from the contacts).
+    #[arg(long = "shear-transfer", value_delimiter = ',', default_value = "pic,flip")]
+    pub shear_transfers: Vec<String>,
     /// Parts to run (default all; `--quick`: those of the CI subset, each in its quick form).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub part: Vec<PartName>,

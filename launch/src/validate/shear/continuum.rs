@@ -1,6 +1,6 @@
 //! The continuum planar shear (Chen 2021 §6.1, Fig. 11 right) watched by the shear-band oracle.
 
-use super::hybrid::{Coupled, HYBRID_CELL_D, HYBRID_TRANSFERS, hybrid_report};
+use super::hybrid::{Coupled, HYBRID_CELL_D, hybrid_report, transfer_named};
 use super::training::{Training, enrich_and_train, training_report};
 use super::*;
 
@@ -144,9 +144,14 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dems: &[DemShear], par
     training_report(dem, &runs, part, md);
     // A hybrid on each DEM sample: its band is compared with the DEM's on the same grains, and
     // one sample does not fix a hybrid's band to better than several D50 (docs/validation.md).
+    let transfers = args
+        .shear_transfers
+        .iter()
+        .map(|n| Ok((n.as_str(), transfer_named(n)?)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let hybrids = dems
         .iter()
-        .flat_map(|dem| HYBRID_TRANSFERS.iter().map(move |&(name, t)| (name, t, dem)))
+        .flat_map(|dem| transfers.iter().map(move |&(name, t)| (name, t, dem)))
         .map(|(name, t, dem)| {
             let run = continuum_run(dem, &model, scene.materials[material].density, HYBRID_CELL_D, Some(t));
             (name, dem, run)

@@ -18,9 +18,21 @@ use std::collections::{HashMap, HashSet};
 /// The hybrid's continuum cells [D50]: the coarse grid of the continuum's two (App. D: both
 /// detect), the cheaper one.
 pub(super) const HYBRID_CELL_D: f64 = 4.0;
-/// The grains' transfers back, one hybrid run each: Yue 2018 Alg. 5–6 as written (`"pic"`),
-/// and ours (`"flip"`, its spin never locked: the shear is quasi-static throughout).
-pub(super) const HYBRID_TRANSFERS: [(&str, GrainTransfer); 2] = [("pic", GrainTransfer::Pic), ("flip", GrainTransfer::Flip)];
+/// The paper's transfer back (Yue 2018 Alg. 5–6 as written), which the large shear runs.
+pub(super) const PAPER_TRANSFER: GrainTransfer = GrainTransfer::Pic;
+
+/// A transfer named as `--shear-transfer` takes it: `pic`, `flip` (ours, its spin never
+/// locked: the shear is quasi-static throughout) or `points:B`, B in [0, 1].
+pub(super) fn transfer_named(name: &str) -> anyhow::Result<GrainTransfer> {
+    match name {
+        "pic" => Ok(GrainTransfer::Pic),
+        "flip" => Ok(GrainTransfer::Flip),
+        _ => match name.strip_prefix("points:").map(str::parse::<f64>) {
+            Some(Ok(b)) if (0.0..=1.0).contains(&b) => Ok(GrainTransfer::Points(b)),
+            _ => anyhow::bail!("--shear-transfer {name:?}: must be pic, flip or points:B with B in [0, 1] (e.g. points:0.95)"),
+        },
+    }
+}
 
 /// The zone of the cell at `x` (off the grid: continuum).
 fn zone_at(cells: &Grid, zones: &[Zone], x: [f64; 3]) -> Zone {
@@ -218,7 +230,7 @@ impl Coupled {
 type Curve = Vec<(f64, f64)>;
 
 /// The hybrid planar shears' table, checks and the band's picture: one run per transfer of
-/// [`HYBRID_TRANSFERS`], on cells of [`HYBRID_CELL_D`] D50. Returns each finished run's τ/σ_yy
+/// `--shear-transfer` and DEM sample, on cells of [`HYBRID_CELL_D`] D50. Returns each finished run's τ/σ_yy
 /// curve, labelled.
 pub(super) fn hybrid_report(
     args: &ValidateArgs,
@@ -235,7 +247,8 @@ pub(super) fn hybrid_report(
          its sample), and coupled from there to the end: each MPM step the DEM's substeps, the hybrid cells' grains (mass and \
          springs × 1 − w) and points (× w) rasterized on the MPM's nodes, the coupler's common velocity on the nodes both have (Yue 2018 Alg. 3, Chen §5), the \
          points' phase 2 and the grains' transfer back: Alg. 5–6 as written (`\"pic\"`: a hybrid grain takes the grid's velocity \
-         and spin) and ours (`\"flip\"`: it keeps its own and adds the coupling's change). The zones stay as the enrichment made \
+         and spin) and ours (`\"flip\"`: it keeps its own and adds the coupling's change), or as `--shear-transfer` names them \
+         (`points:B`: Yue 2018 §3.7's blend, FLIP share B, from the saved position, spin from the contacts). The zones stay as the enrichment made \
          them, and each grain and point keeps the share its cell gave it then (as the runtime between two oracle epochs). The band is measured as the DEM's (App. A, same window) in the grains that were in discrete or hybrid cells when \
          the window opened; grains that end in continuum cells (strays, which an oracle epoch would convert) are \
          counted. The stress is the points' mean (equilibrium makes σ_xy the same at every height).\n\n\
@@ -369,4 +382,21 @@ pub(super) fn hybrid_report(
         &chart,
     )?;
     Ok(curves)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--shear-transfer`'s names, and a clear refusal of anything else.
+    #[test]
+    fn transfers_are_named_as_the_option_takes_them() {
+        assert_eq!(transfer_named("pic").unwrap(), GrainTransfer::Pic);
+        assert_eq!(transfer_named("flip").unwrap(), GrainTransfer::Flip);
+        assert_eq!(transfer_named("points:0.95").unwrap(), GrainTransfer::Points(0.95));
+        for bad in ["points", "points:1.5", "points:x", "apic"] {
+            let e = transfer_named(bad).unwrap_err().to_string();
+            assert!(e.contains(bad) && e.contains("points:B"), "{e}");
+        }
+    }
 }

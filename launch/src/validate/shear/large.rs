@@ -5,7 +5,7 @@
 //! measured costs (a grain's, a cell's) and set against the measured speed-up.
 
 use super::continuum::{ContinuumShear, continuum_run};
-use super::hybrid::HYBRID_TRANSFERS;
+use super::hybrid::PAPER_TRANSFER;
 use super::*;
 use grains_dem::DemState;
 
@@ -107,8 +107,7 @@ pub(super) fn large_planar_shear(
     // The continuum alone on the tall specimen (its cost per cell), then the hybrid.
     let continuum = continuum_run(&tall, model, grain_density, CELL_D, None)?;
     // The paper's transfer (Alg. 5–6 as written): the cost is the paper's method's.
-    let transfer = HYBRID_TRANSFERS[0];
-    let hybrid: ContinuumShear = continuum_run(&tall, model, grain_density, CELL_D, Some(transfer.1))?;
+    let hybrid: ContinuumShear = continuum_run(&tall, model, grain_density, CELL_D, Some(PAPER_TRANSFER))?;
     let h = hybrid
         .hybrid
         .as_ref()
@@ -139,7 +138,7 @@ pub(super) fn large_planar_shear(
     let _ = writeln!(
         md,
         "### §6.4: a large planar shear, cost\n\n§6.1's specimen {TIMES} times as tall ({:.0} × {:.0} D50), as Chen's large \
-         planar shear (Table 11: 10,000 D50 tall, 0.75-cm cells, 116× faster than its DEM). The hybrid (`{}`, the paper's \
+         planar shear (Table 11: 10,000 D50 tall, 0.75-cm cells, 116× faster than its DEM). The hybrid (`pic`, the paper's \
          transfer) on {cell:.1}-D50 cells ({} points), enriched from §6.1's seed-1 sample at the continuum's band in the \
          middle, trained and coupled as in §6.1. As Chen's Table 11, the DEM at this size ({tall_grains} grains) is not run to \
          its end: its cost is §6.1's shear ({:.0} s for {small_grains} grains, {} steps) times the ratio of the costs of a \
@@ -151,7 +150,7 @@ pub(super) fn large_planar_shear(
          |---|---:|---:|---:|---:|---:|---:|---:|\n\
          | DEM, {TIMES} × §6.1 | {tall_grains} | | {dem_wall:.0} s (scaled) | | | | |\n\
          | continuum, {cell:.1}-D50 cells | | {} | {:.0} s | | | | |\n\
-         | hybrid, `{}` | {grains} | {} | {:.0} s | {t_s:.1} D50 | {centre:.1} D50 | {:.3} ({:.2}) | {residual:.3} |\n\n\
+         | hybrid, `pic` | {grains} | {} | {:.0} s | {t_s:.1} D50 | {centre:.1} D50 | {:.3} ({:.2}) | {residual:.3} |\n\n\
          Speed-up: **{measured:.1}×** (the DEM's {dem_wall:.0} s over the hybrid's {:.0} s: its continuum up to the detection \
          {:.0} s, the enrichment and the training {:.0} s, the coupled run {:.0} s). The grains span {lo:.0}–{hi:.0} D50 of {:.0} (T_D / T = \
          {t_d_over_t:.3}). §6.4.1's model with the costs measured here: C_D = {c_d:.2e} s a grain and DEM step, C_C = \
@@ -162,7 +161,6 @@ pub(super) fn large_planar_shear(
          {}.\n",
         tall.width / d,
         tall.height / d,
-        transfer.0,
         hybrid.points,
         dem.shear_wall,
         dem.shear_steps,
@@ -174,7 +172,6 @@ pub(super) fn large_planar_shear(
         1e3 * dem.shear_wall / steps,
         continuum.points,
         continuum.wall,
-        transfer.0,
         hybrid.points,
         hybrid.wall,
         peak.1,
