@@ -750,10 +750,7 @@ fn rigid_bodies_carry_a_continuum_by_contact_and_threads_give_the_same_bytes() {
     let sand = points.array("mass").expect("point masses").iter().sum::<f64>() * 9.81;
     let square: Vec<glam::DVec2> = scene.rigids[1].vertices.iter().map(|&[x, y]| glam::DVec2::new(x, y)).collect();
     let square_weight = grains_dem::bodies::mass_properties(&square, scene.rigids[1].radius).area * 2500.0 * 9.81;
-    let bodies = std::fs::read_to_string(dir.join("bodies.csv")).unwrap();
-    let header: Vec<&str> = bodies.lines().next().unwrap().split(',').collect();
-    let last: Vec<f64> = bodies.lines().last().unwrap().split(',').map(|v| v.parse().unwrap()).collect();
-    let col = |name: &str| last[header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"))];
+    let col = last_row(dir.join("bodies.csv"));
     let total = sand + square_weight;
     assert!(
         (-col("body0_fy") - total).abs() < 0.01 * total,
@@ -805,6 +802,14 @@ fn rigid_bodies_carry_a_continuum_by_contact_and_threads_give_the_same_bytes() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// The last row of a per-step CSV log (`bodies.csv`), by column name.
+fn last_row(csv: std::path::PathBuf) -> impl Fn(&str) -> f64 {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let header: Vec<String> = text.lines().next().unwrap().split(',').map(String::from).collect();
+    let last: Vec<f64> = text.lines().last().unwrap().split(',').map(|v| v.parse().unwrap()).collect();
+    move |name: &str| last[header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}"))]
+}
+
 /// A continuum in a non-convex rigid body through a real run (`tests/scenes/mpm_in_cup_2d.toml`):
 /// MPM sand in a fixed U-shaped cup, one spheropolygon with two reflex corners, gravity
 /// tilted 17.8° towards its left side, frictionless. At rest the cup carries the sand's
@@ -825,10 +830,7 @@ fn a_non_convex_cup_carries_the_continuum_in_it() {
     let points = grains_service::vtu::Frame::read(&dir.join(format!("frames/points_{:08}.vtu", scene.steps))).unwrap();
     let mass = points.array("mass").expect("point masses").iter().sum::<f64>();
     let weight = [mass * scene.gravity[0], mass * scene.gravity[1]];
-    let bodies = std::fs::read_to_string(dir.join("bodies.csv")).unwrap();
-    let header: Vec<&str> = bodies.lines().next().unwrap().split(',').collect();
-    let last: Vec<f64> = bodies.lines().last().unwrap().split(',').map(|v| v.parse().unwrap()).collect();
-    let col = |name: &str| last[header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"))];
+    let col = last_row(dir.join("bodies.csv"));
     let load = [col("body0_fx"), col("body0_fy")];
     let size = weight[0].hypot(weight[1]);
     assert!(

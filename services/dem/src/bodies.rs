@@ -39,7 +39,7 @@ use crate::contact::{ContactParams, ContactState, contact_force};
 use crate::space::D2;
 use crate::state::{Wall, WallShape};
 use glam::DVec2;
-pub use grains_grid::polygon::{Near, is_reflex, near, touching};
+pub use grains_grid::polygon::{Near, is_convex, is_reflex, near, touching};
 
 /// How a body moves.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -403,6 +403,7 @@ pub fn forces(
     let mut list = Vec::new();
     let mut on_grains = Vec::new();
     let polys: Vec<Vec<DVec2>> = bodies.iter().map(Body::vertices).collect();
+    let convex: Vec<bool> = polys.iter().map(|p| is_convex(p)).collect();
     let sides: Vec<Side> = bodies.iter().map(Body::side).collect();
     let candidates = near_disks(bodies, grains);
     let mut load = vec![(DVec2::ZERO, 0.0); bodies.len()];
@@ -426,12 +427,12 @@ pub fn forces(
                     if is_reflex(&polys[s], k) {
                         continue;
                     }
-                    touching(&polys[o], v, a_s + a_o, |feature, at| {
+                    touching(&polys[o], convex[o], v, a_s + a_o, |feature, at| {
                         // A vertex–vertex touch once: in the first pass, and only between two
                         // vertices each touching the other (else the other's vertex touches
                         // this body's edge, and the second pass has it).
                         if let Some(w) = at.vertex
-                            && (!first || !touches_vertex(&polys[s], k, polys[o][w], a_s + a_o))
+                            && (!first || !touches_vertex(&polys[s], convex[s], k, polys[o][w], a_s + a_o))
                         {
                             return;
                         }
@@ -544,7 +545,7 @@ pub fn forces(
                     }
                     // The segment's ends against the body's edges (on its vertices: above).
                     for (e, &end) in seg.iter().enumerate() {
-                        touching(&polys[i], end, a, |feature, on| {
+                        touching(&polys[i], convex[i], end, a, |feature, on| {
                             if on.vertex.is_none() {
                                 let k = u32::MAX - e as u32;
                                 at(&mut load, &mut list, k, feature, end, on.normal, on.gap, wall_side(p, 0.0), false);
@@ -565,9 +566,9 @@ pub fn forces(
 }
 
 /// Whether `p`, within `reach` of the polygon `poly`, touches its vertex `k` ([`touching`]).
-fn touches_vertex(poly: &[DVec2], k: usize, p: DVec2, reach: f64) -> bool {
+fn touches_vertex(poly: &[DVec2], convex: bool, k: usize, p: DVec2, reach: f64) -> bool {
     let mut found = false;
-    touching(poly, p, reach, |_, at| found |= at.vertex == Some(k));
+    touching(poly, convex, p, reach, |_, at| found |= at.vertex == Some(k));
     found
 }
 
@@ -598,6 +599,8 @@ fn disk_contacts(
     load: &mut [(DVec2, f64)],
 ) -> Vec<(usize, DVec2, f64)> {
     let mut out = Vec::new();
+    // Once per body, not per disk: the hot path of a continuum against a body.
+    let convex = is_convex(poly);
     for disk in candidates.iter().map(|&k| &disks[k]) {
         let s = Side {
             x: disk.x,
@@ -606,7 +609,7 @@ fn disk_contacts(
             inv_mass: disk.inv_mass,
             inv_inertia: 0.0,
         };
-        touching(poly, disk.x, disk.radius + body.radius, |feature, at| {
+        touching(poly, convex, disk.x, disk.radius + body.radius, |feature, at| {
             let k = key(disk.id, body.id, feature);
             let mut state = history(&k);
             if let Some(t) = touch(

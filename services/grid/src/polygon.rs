@@ -106,9 +106,10 @@ pub fn is_reflex(poly: &[DVec2], k: usize) -> bool {
     n >= 3 && cross(poly[k] - poly[(k + n - 1) % n], poly[(k + 1) % n] - poly[k]) < 0.0
 }
 
-/// The parts of the outline of `poly` (counter-clockwise, simple) that a disk of radius
-/// `reach` centred at `p` touches, each as `f(feature, near)`: the point it is nearest to on
-/// that part, at the signed distance `near.gap` along `near.normal`.
+/// The parts of the outline of `poly` (counter-clockwise, simple; `convex` as [`is_convex`]
+/// says, which a caller knows once per polygon, not per point) that a disk of radius `reach`
+/// centred at `p` touches, each as `f(feature, near)`: the point it is nearest to on that
+/// part, at the signed distance `near.gap` along `near.normal`.
 ///
 /// - A convex polygon (or a point, or a segment) has one part, the nearest point ([`near`],
 ///   feature 0), given whatever its distance: a bonded contact holds beyond the reach.
@@ -119,9 +120,9 @@ pub fn is_reflex(poly: &[DVec2], k: usize) -> bool {
 ///   sides: two parts, as a disk wedged in a corner has two contacts. A reflex vertex is
 ///   never a part: from outside, one of its edges is always as near. From inside (a deep
 ///   overlap): the nearest edge or vertex only, so that the contact pushes out.
-pub fn touching(poly: &[DVec2], p: DVec2, reach: f64, mut f: impl FnMut(u32, Near)) {
+pub fn touching(poly: &[DVec2], convex: bool, p: DVec2, reach: f64, mut f: impl FnMut(u32, Near)) {
     let n = poly.len();
-    if is_convex(poly) {
+    if convex {
         f(0, near(poly, p));
         return;
     }
@@ -231,7 +232,7 @@ mod tests {
         assert!((near(&l, DVec2::new(1.5, 1.5)).gap - 0.5).abs() < 1e-15, "the notch is outside");
         let parts = |p: DVec2, reach: f64| {
             let mut out = Vec::new();
-            touching(&l, p, reach, |k, at| out.push((k, at)));
+            touching(&l, false, p, reach, |k, at| out.push((k, at)));
             out
         };
         let face = parts(DVec2::new(1.5, -0.1), 0.2);
@@ -252,7 +253,8 @@ mod tests {
         assert!((deep[0].1.gap + 0.1).abs() < 1e-12);
         let sq = [DVec2::ZERO, DVec2::X, DVec2::ONE, DVec2::Y];
         let mut one = Vec::new();
-        touching(&sq, DVec2::new(3.0, 0.5), 0.1, |k, at| one.push((k, at)));
+        assert!(is_convex(&sq));
+        touching(&sq, true, DVec2::new(3.0, 0.5), 0.1, |k, at| one.push((k, at)));
         assert_eq!(one, vec![(0, near(&sq, DVec2::new(3.0, 0.5)))]);
     }
 }
