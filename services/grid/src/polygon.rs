@@ -27,6 +27,11 @@ pub struct Near {
 /// normal pointing out through the nearest edge, so that a contact pushes it out, never on
 /// through.
 pub fn near(poly: &[DVec2], p: DVec2) -> Near {
+    nearest(poly, p).0
+}
+
+/// [`near`], and the edge the nearest point is on (None for a single vertex).
+fn nearest(poly: &[DVec2], p: DVec2) -> (Near, Option<usize>) {
     let n = poly.len();
     let edges = match n {
         1 => 0,
@@ -64,7 +69,7 @@ pub fn near(poly: &[DVec2], p: DVec2) -> Near {
     } else {
         DVec2::ZERO
     };
-    if inside {
+    let at = if inside {
         Near {
             y,
             vertex,
@@ -73,7 +78,8 @@ pub fn near(poly: &[DVec2], p: DVec2) -> Near {
         }
     } else {
         Near { y, vertex, gap: d, normal }
-    }
+    };
+    (at, edge)
 }
 
 /// Whether the closed polygon `poly` winds around `p` (the winding number is not zero).
@@ -126,13 +132,11 @@ pub fn touching(poly: &[DVec2], convex: bool, p: DVec2, reach: f64, mut f: impl 
         f(0, near(poly, p));
         return;
     }
-    let at = near(poly, p);
+    let (at, edge) = nearest(poly, p);
     if at.gap < 0.0 {
         let feature = match at.vertex {
             Some(v) => n + v,
-            None => (0..n)
-                .min_by(|&i, &j| segment_distance(poly, i, p).total_cmp(&segment_distance(poly, j, p)))
-                .unwrap_or(0),
+            None => edge.unwrap_or(0),
         };
         f(feature as u32, at);
         return;
@@ -178,14 +182,6 @@ pub fn touching(poly: &[DVec2], convex: bool, p: DVec2, reach: f64, mut f: impl 
             f((n + k) as u32, near);
         }
     }
-}
-
-/// Distance from `p` to edge `k` of `poly`.
-fn segment_distance(poly: &[DVec2], k: usize, p: DVec2) -> f64 {
-    let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
-    let e = b - a;
-    let t = ((p - a).dot(e) / e.length_squared()).clamp(0.0, 1.0);
-    (p - a - e * t).length()
 }
 
 #[cfg(test)]
