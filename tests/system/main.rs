@@ -342,19 +342,23 @@ fn an_external_coupler_attaches_and_another_protocol_version_is_refused() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
-/// The command `grains run --external <role>` printed for the missing participant: the line
-/// after its waiting message.
+/// The command `grains run --external <role>` printed for the missing participant: the whole
+/// line after its waiting message. It waits for that line itself: another role's command,
+/// printed before, already holds "--out-dir" (waiting for that alone lost a race once).
 fn printed_command(launcher: &mut Running, role: &str) -> String {
-    let printed = launcher
-        .wait_for("--out-dir", Duration::from_secs(60))
-        .lines()
-        .skip_while(|l| !l.contains(&format!("waiting for an external {role}")))
-        .nth(1)
-        .expect("the line after the waiting message")
-        .trim()
-        .to_string();
-    assert!(printed.contains("--out-dir"), "{printed}");
-    printed
+    let waiting = format!("waiting for an external {role}");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let text = launcher.wait_for(&waiting, Duration::from_secs(60));
+        let after = text.split(waiting.as_str()).nth(1).unwrap_or("");
+        if let Some(line) = after.split_inclusive('\n').nth(1).filter(|l| l.ends_with('\n')) {
+            let printed = line.trim().to_string();
+            assert!(printed.contains("--out-dir"), "{printed}");
+            return printed;
+        }
+        assert!(Instant::now() < deadline, "no command after {waiting:?}:\n{text}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// Python `module` of `clients/python` started with the arguments of the printed command
