@@ -50,7 +50,8 @@ pub enum Colour {
 pub struct Scene2 {
     pub min: [f64; 2],
     pub max: [f64; 2],
-    /// Grains: centre [m], radius [m], speed [m/s].
+    /// Grains: centre [m], radius [m], speed [m/s] (what `Colour::Speed` draws; a strain picture
+    /// of `grains validate` puts the strain there).
     pub grains: Vec<([f64; 2], f64, f64)>,
     /// Points: centre [m], half their spacing [m], speed [m/s].
     pub points: Vec<([f64; 2], f64, f64)>,

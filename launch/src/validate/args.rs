@@ -23,10 +23,13 @@ pub enum PartName {
     Sdem,
     /// Shear bands (Chen 2021): the planar shear as DEM and as a continuum with the oracle.
     Shear,
+    /// Plate indentation (Chen 2021 §6.3): the plate's force against its depth, DEM and
+    /// continuum.
+    Plate,
 }
 
 impl PartName {
-    pub const ALL: [PartName; 8] = [
+    pub const ALL: [PartName; 9] = [
         PartName::Contact,
         PartName::Stability,
         PartName::Column,
@@ -35,6 +38,7 @@ impl PartName {
         PartName::Cost,
         PartName::Sdem,
         PartName::Shear,
+        PartName::Plate,
     ];
 
     pub fn name(self) -> &'static str {
@@ -47,13 +51,18 @@ impl PartName {
             PartName::Cost => "cost",
             PartName::Sdem => "sdem",
             PartName::Shear => "shear",
+            PartName::Plate => "plate",
         }
     }
 
-    /// In CI's `--quick` set (the drum and the accuracy–cost runs take too long for it; the
-    /// rigid bodies' and the band measure's checks that CI needs are tests of their own).
+    /// In CI's `--quick` set (the drum, the accuracy–cost runs and the plate take too long for
+    /// it; the rigid bodies' and the band measure's checks that CI needs are tests of their
+    /// own).
     pub fn quick(self) -> bool {
-        !matches!(self, PartName::Drum | PartName::Cost | PartName::Sdem | PartName::Shear)
+        !matches!(
+            self,
+            PartName::Drum | PartName::Cost | PartName::Sdem | PartName::Shear | PartName::Plate
+        )
     }
 }
 
@@ -90,7 +99,8 @@ pub struct ValidateArgs {
     #[arg(long)]
     pub publish: Option<PathBuf>,
     /// Packings poured (seeds 1..=N) and run at every aspect ratio; the check compares the
-    /// runouts averaged over them. Default 3, `--quick` 1.
+    /// runouts averaged over them. Default 3, `--quick` 1. `--part plate`: the DEM beds
+    /// (default 2).
     #[arg(long)]
     pub packings: Option<u64>,
     /// The grains' transfers back that `--part shear`'s hybrid runs, one run each on every DEM

@@ -10,7 +10,9 @@
 //! - [`cost`]: error against wall time, with the Pareto front;
 //! - [`sdem`]: rigid bodies in contact with a continuum (Jiang 2020 §5);
 //! - [`shear`]: shear bands (Chen 2021): the planar shear as DEM and as a continuum with the
-//!   shear-band oracle.
+//!   shear-band oracle;
+//! - [`plate`]: plate indentation (Chen 2021 §6.3), the plate's force against its depth as DEM
+//!   and as the calibrated continuum.
 //!
 //! Below the parts: [`runs`] (running scenes, reading what a run did), [`packings`] (every
 //! packing poured, in one place), [`deposit`] (frames and deposits read back), [`pictures`]
@@ -29,6 +31,7 @@ pub mod deposit;
 pub mod drum;
 pub mod packings;
 pub mod pictures;
+pub mod plate;
 pub mod runs;
 pub mod scenes;
 pub mod sdem;
@@ -115,6 +118,7 @@ fn run_part(p: PartName, args: &ValidateArgs) -> anyhow::Result<Part> {
         PartName::Cost => cost::validate(args),
         PartName::Sdem => sdem::validate(args),
         PartName::Shear => shear::validate(args),
+        PartName::Plate => plate::validate(args),
     }
 }
 

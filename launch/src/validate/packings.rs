@@ -95,3 +95,30 @@ pub fn drum(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
         overrides.map(String::from).to_vec(),
     )
 }
+
+/// The plate indentation's bed of `seed`: the column's pour over the plate scene's width, a
+/// lattice a third taller than the bed's cut at [`scenes::plate::TOP`].
+pub fn plate(args: &ValidateArgs, seed: u64) -> anyhow::Result<PathBuf> {
+    use scenes::plate::{TOP, WIDTH};
+    let pour_top = BOTTOM + 1.35 * (TOP - BOTTOM) + 0.005;
+    let overrides = vec![
+        format!("domain.max=[{WIDTH},{}]", pour_top + 0.02),
+        format!("body.0.max=[{WIDTH},{pour_top}]"),
+        format!("body.1.max=[{WIDTH},0.0013]"),
+        format!("wall.2.point=[{WIDTH},0.0]"),
+        format!("run.duration={:.2}", (2.0 * pour_top / 9.81).sqrt() + 0.2),
+        format!("run.seed={seed}"),
+    ];
+    let path = poured(args, &format!("packing_plate_seed{seed}.data"), scenes::column::PACKING, overrides)?;
+    let data = grains_dem_service::lammps_data::read(&path).map_err(anyhow::Error::msg)?;
+    let top = data.atoms.iter().filter(|a| a.kind == 1).map(|a| a.x[1]).fold(0.0, f64::max);
+    if top < TOP + D {
+        bail!(
+            "{}: the packing is {:.1} mm tall, too short for the plate's bed cut at {:.1} mm; delete it to pour a new one",
+            path.display(),
+            top * 1e3,
+            TOP * 1e3
+        );
+    }
+    Ok(path)
+}

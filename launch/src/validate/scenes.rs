@@ -28,6 +28,24 @@ pub mod silo {
     pub const D: f64 = 0.001;
 }
 
+/// Plate indentation (Chen 2021 §6.3): a bed [`WIDTH`] wide between walls, cut at [`TOP`]
+/// from a poured packing (the DEM) or filled to it (the continuum), and a plate scripted down
+/// into its middle (`rigid.0` of the DEM scene, `rigid.1` of the continuum's, after the floor).
+pub mod plate {
+    pub const DEM: &str = "plate_indentation_2d.toml";
+    pub const MPM: &str = "plate_indentation_mpm_2d.toml";
+    /// The bed's width and its top [m] (the continuum scene's body.0.max).
+    pub const WIDTH: f64 = 0.16;
+    pub const TOP: f64 = 0.04;
+    /// The plate: its width B, its outline's half height (the centre of mass above its bottom),
+    /// its centre's x [m], its speed [m/s] (the scenes' own).
+    pub const B: f64 = 0.016;
+    pub const HALF_HEIGHT: f64 = 0.004;
+    pub const CENTRE: f64 = 0.08;
+    /// How deep the plate goes: half its width [m].
+    pub const DEPTH: f64 = 0.008;
+}
+
 /// The turning drum.
 pub mod drum {
     pub const SCENE: &str = "drum_hybrid_2d.toml";

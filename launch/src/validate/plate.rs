@@ -1,0 +1,206 @@
+//! `grains validate --part plate`: plate indentation (Chen 2021 §6.3, scaled to this machine).
+//! A rigid plate scripted down at 5 cm/s into the middle of a bed of grains
+//! (`plate_indentation_2d.toml`, its bed cut from a poured packing) and of the same bed as the
+//! continuum calibrated on a DEM biaxial test of those grains (`plate_indentation_mpm_2d.toml`):
+//! the plate's force against its depth for both, the DEM on `--packings` beds (default 2). The
+//! continuum's curve is a prediction (its friction angle and stiffness come from another test,
+//! not from this one); the check compares it with the DEM's mean over the second half of the
+//! travel. Chen's hybrid (the continuum turning discrete
+//! where the bands form) is not built into runs, so its third curve is not here.
+
+use super::args::ValidateArgs;
+use super::packings;
+use super::pictures;
+use super::runs::{finished, load_with};
+use super::scenes::plate::{B, CENTRE, DEM, DEPTH, HALF_HEIGHT, MPM, TOP, WIDTH};
+use crate::metrics::MetricsTable;
+use crate::report::Part;
+use crate::report::chart::{Chart, Kind, Series};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// The continuum's mean force over the second half of the travel within this share of the
+/// DEM's: the bearing capacity of a calibrated continuum, as predicted, not fitted.
+const TOLERANCE: f64 = 0.3;
+/// The plate starts this far above the bed's top [m].
+const GAP: f64 = 0.0015;
+/// The DEM runs' duration: the gap and [`DEPTH`] at 5 cm/s, and a little more [s] (the
+/// continuum scene's is the same).
+const END: f64 = (GAP + DEPTH) / 0.05 + 0.01;
+
+/// The plate's (depth below [`TOP`], upward force) of a run, per macro-step; `k` the plate's
+/// body index in `bodies.csv`.
+fn bearing(dir: &Path, k: usize) -> anyhow::Result<Vec<(f64, f64)>> {
+    let path = dir.join("bodies.csv");
+    let t = MetricsTable::parse(&std::fs::read_to_string(&path)?, &path)?;
+    let (y, f) = (t.column(&format!("body{k}_y"))?, t.column(&format!("body{k}_fy"))?);
+    Ok(y.iter().zip(&f).map(|(y, f)| (TOP - (y - HALF_HEIGHT), *f)).collect())
+}
+
+/// The mean force of a curve over depths [a, b].
+fn mean_over(curve: &[(f64, f64)], a: f64, b: f64) -> f64 {
+    let inside: Vec<f64> = curve.iter().filter(|(d, _)| *d >= a && *d <= b).map(|(_, f)| *f).collect();
+    inside.iter().sum::<f64>() / inside.len().max(1) as f64
+}
+
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
+    let mut md = String::from("## Plate indentation (Chen 2021 §6.3)\n\n");
+    let mpm_path = args.scenes.join(MPM);
+    let mpm_scene = load_with(&mpm_path, &[])?;
+    let mpm_top = match mpm_scene.bodies[0].shape {
+        grains_protocol::scene::Shape::Box { max, .. } => max[1],
+        _ => f64::NAN,
+    };
+    anyhow::ensure!(
+        (mpm_top - TOP).abs() < 1e-12,
+        "{}: the bed's top is {mpm_top} m, the validation reads it at {TOP} m",
+        mpm_path.display()
+    );
+    let duration = mpm_scene.steps as f64 * mpm_scene.dt;
+    anyhow::ensure!(
+        (duration - END).abs() <= mpm_scene.dt,
+        "{}: the run lasts {duration} s, the validation reads it to {END} s",
+        mpm_path.display()
+    );
+    let seeds = args.packings.unwrap_or(2);
+    anyhow::ensure!(seeds >= 1, crate::run::BadInput("--packings: at least 1".into()));
+    // Each DEM bed cut at TOP, the plate GAP above it (outline: vertices + its 0.5-mm radius).
+    let (x0, x1) = (CENTRE - 0.5 * B + 0.0005, CENTRE + 0.5 * B - 0.0005);
+    let (y0, y1) = (TOP + GAP + 0.0005, TOP + GAP + 2.0 * HALF_HEIGHT - 0.0005);
+    let mut dems = Vec::new();
+    for seed in 1..=seeds {
+        let packing = packings::plate(args, seed)?;
+        tracing::info!("validate: plate, DEM bed of packing {seed}");
+        let run = finished(
+            args,
+            &args.scenes.join(DEM),
+            vec![
+                format!("body.0.packing={:?}", packing.display().to_string()),
+                format!("body.0.max=[{WIDTH},{TOP}]"),
+                format!("rigid.0.vertices=[[{x0},{y0}],[{x1},{y0}],[{x1},{y1}],[{x0},{y1}]]"),
+                format!("run.duration={END:.3}"),
+            ],
+        )?;
+        let curve = bearing(&run.dir, 0)?;
+        dems.push((run, curve));
+    }
+    let mpm = finished(args, &mpm_path, Vec::new())?;
+    let continuum = bearing(&mpm.dir, 1)?;
+    let gamma = {
+        let m = &mpm_scene.materials[mpm_scene.bodies[0].material];
+        m.density * m.mpm.as_ref().map_or(1.0, |m| m.packing) * 9.81
+    };
+    let seed_columns: String = (1..=seeds).map(|s| format!(" DEM, packing {s} [N/m] |")).collect();
+    let _ = writeln!(
+        md,
+        "A plate {B} m wide, scripted down at 5 cm/s, into a bed {WIDTH} m wide and {TOP} m deep: {} grains cut from each of \
+         {seeds} poured packings (`{DEM}`), or {} material points of the continuum calibrated on a DEM biaxial test of the same \
+         grains (`{MPM}`; γ = ρ g = {gamma:.0} N/m³). Depth from the bed's top at {TOP} m (the grains' tops and the points' \
+         contact disks reach about 0.5 mm above it). Force per metre of plate, the mean over ±0.5 mm of each depth. Chen's \
+         Fig. 23 (DEM and hybrid): a peak, then the force fluctuating about a constant.\n\n| depth [mm] |{seed_columns} DEM \
+         mean [N/m] | continuum [N/m] | continuum / DEM | DEM q/(γB) |\n|---:|{}---:|---:|---:|---:|",
+        dems.iter().map(|(r, _)| r.grains.to_string()).collect::<Vec<_>>().join(" / "),
+        mpm.points,
+        "---:|".repeat(seeds as usize)
+    );
+    for mm in 1..=(DEPTH * 1e3).round() as u32 {
+        let d = mm as f64 * 1e-3;
+        let each: Vec<f64> = dems.iter().map(|(_, c)| mean_over(c, d - 5e-4, d + 5e-4)).collect();
+        let dem = each.iter().sum::<f64>() / each.len() as f64;
+        let f_mpm = mean_over(&continuum, d - 5e-4, d + 5e-4);
+        let cells: String = each.iter().map(|f| format!(" {f:.1} |")).collect();
+        let _ = writeln!(
+            md,
+            "| {mm} |{cells} {dem:.1} | {f_mpm:.1} | {:.2} | {:.2} |",
+            f_mpm / dem,
+            dem / B / (gamma * B)
+        );
+    }
+    let mut chart = Chart {
+        title: "Plate indentation: the plate's force against its depth".into(),
+        x_label: "depth [mm]".into(),
+        y_label: "force [N/m]".into(),
+        ..Chart::default()
+    };
+    let curves = dems
+        .iter()
+        .enumerate()
+        .map(|(k, (_, c))| (format!("DEM, packing {}", k + 1), c))
+        .chain(std::iter::once(("continuum (MPM)".to_string(), &continuum)));
+    for (name, c) in curves {
+        chart.series.push(Series::new(
+            name,
+            Kind::Line,
+            c.iter().filter(|(d, _)| *d >= -GAP).map(|&(d, f)| (1e3 * d, f)).collect(),
+        ));
+    }
+    part.chart(
+        &args.out,
+        "plate_force",
+        "The plate's force against its depth, DEM and continuum",
+        &chart,
+    )?;
+    let (a, b) = (0.5 * DEPTH, DEPTH);
+    let each: Vec<f64> = dems.iter().map(|(_, c)| mean_over(c, a, b)).collect();
+    let f_dem = each.iter().sum::<f64>() / each.len() as f64;
+    let f_mpm = mean_over(&continuum, a, b);
+    part.check(
+        "plate indentation: the calibrated continuum's force within 30% of the DEM's",
+        "Chen 2021 §6.3 (the DEM as ground truth); the continuum calibrated on a biaxial test",
+        format!(
+            "mean over {:.0}–{:.0} mm: continuum {f_mpm:.1} N/m, DEM {f_dem:.1} N/m ({:+.1}%; the packings {})",
+            1e3 * a,
+            1e3 * b,
+            100.0 * (f_mpm / f_dem - 1.0),
+            each.iter().map(|f| format!("{f:.1}")).collect::<Vec<_>>().join(", ")
+        ),
+        format!("within {:.0}%", 100.0 * TOLERANCE),
+        ((f_mpm / f_dem) - 1.0).abs() <= TOLERANCE,
+    );
+    let _ = writeln!(
+        md,
+        "\nWall time: DEM {} s, continuum {:.0} s.\n",
+        dems.iter().map(|(r, _)| format!("{:.0}", r.wall)).collect::<Vec<_>>().join(" / "),
+        mpm.wall
+    );
+    let view = Some(([CENTRE - 2.5 * B, 0.0], [CENTRE + 2.5 * B, TOP + 0.012]));
+    pictures::last_frames(
+        &mut part,
+        &args.out,
+        "plate_end",
+        "The bed under the plate at the end of its travel, coloured by speed (dark blue at rest, yellow the fastest): DEM of \
+         packing 1 (top), continuum (bottom)",
+        &[
+            vec![("DEM, packing 1".to_string(), dems[0].0.dir.as_path())],
+            vec![("continuum".to_string(), mpm.dir.as_path())],
+        ],
+        view,
+        crate::render::Colour::Speed,
+    )?;
+    // The bands (Chen's Fig. 24): the strain from about 2.5 mm of depth to the end.
+    let from = (GAP + 0.0025) / 0.05;
+    pictures::strain_rows(
+        &mut part,
+        &args.out,
+        "plate_strain",
+        "Incremental strain under the plate (Cundall's best-fit strain, dark blue none, yellow the 98th percentile and more): \
+         DEM of packing 1 (top), continuum (bottom)",
+        &[("DEM, packing 1", dems[0].0.dir.as_path()), ("continuum", mpm.dir.as_path())],
+        from,
+        END,
+        view,
+    )?;
+    part.md = md;
+    Ok(part)
+}
+
+#[cfg(test)]
+mod tests {
+    /// The mean over a depth window takes the samples inside it only.
+    #[test]
+    fn the_mean_force_takes_the_window_s_samples() {
+        let curve = [(0.0, 100.0), (0.001, 1.0), (0.002, 3.0), (0.003, 100.0)];
+        assert_eq!(super::mean_over(&curve, 0.0005, 0.0025), 2.0);
+    }
+}
