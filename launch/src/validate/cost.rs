@@ -73,7 +73,6 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         "Column collapse a = 1: the deposit of every run of the chart, one row per model",
         &by_family(&column),
         Some(([0.0, 0.0], [1.15 * reach, 1.15 * (BOTTOM + L0)])),
-        crate::render::Colour::Model,
     )?;
     let silo = silo_rows(args)?;
     table(&mut md, "Silo, 6-mm orifice (error: discharge rate)", &silo, false);

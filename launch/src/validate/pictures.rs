@@ -49,8 +49,8 @@ pub fn side_by_side(
 }
 
 /// Draws the last frame of each run of `rows` (one row per model: (label, run directory))
-/// into `<out>/<stem>.png`, all in `view` and coloured by `colour`, and lists it under `part`.
-/// A run without frames is an error: every run drawn here wrote its end.
+/// into `<out>/<stem>.png`, all in `view`, and lists it under `part`. A run without frames is
+/// an error: every run drawn here wrote its end.
 pub fn last_frames(
     part: &mut Part,
     out: &Path,
@@ -58,7 +58,6 @@ pub fn last_frames(
     caption: &str,
     rows: &[Vec<(String, &Path)>],
     view: Option<([f64; 2], [f64; 2])>,
-    colour: Colour,
 ) -> anyhow::Result<()> {
     let mut drawn = Vec::new();
     for row in rows.iter().filter(|r| !r.is_empty()) {
@@ -72,39 +71,25 @@ pub fn last_frames(
         }
         drawn.push(panels_of_row);
     }
-    panels(&drawn, colour, PANEL, &out.join(format!("{stem}.png")))?;
+    panels(&drawn, Colour::Model, PANEL, &out.join(format!("{stem}.png")))?;
     part.pictures.push((stem.to_string(), caption.to_string()));
     Ok(())
 }
 
-/// Incremental-strain pictures (as Chen 2021 Figs. 11, 18 and 24): one row per run of
-/// `runs` (label, run directory), its grains and points in `view` at its frame nearest `to`
-/// [s], coloured by Cundall's best-fit deviatoric strain since its frame nearest `from`
-/// (`grains_oracle::band`, each centre with its neighbours within 1.5 of its size then): dark
-/// blue none, yellow the 98th percentile of all the panels' strains or more. Into
-/// `<out>/<stem>.png`, listed under `part`.
-#[allow(clippy::too_many_arguments)]
-pub fn strain_rows(
-    part: &mut Part,
-    out: &Path,
-    stem: &str,
-    caption: &str,
-    runs: &[(&str, &Path)],
-    from: f64,
-    to: f64,
-    view: Option<([f64; 2], [f64; 2])>,
-) -> anyhow::Result<()> {
-    use grains_oracle::band::{best_fit_strain, neighbours, percentile};
+/// A run's grains and points in `view` at its frame nearest `to` [s], each carrying (in the
+/// place of its speed) Cundall's best-fit deviatoric strain since the frame nearest `from`
+/// (`grains_oracle::band`, each centre with its neighbours within 1.5 of its size then; 0 for
+/// an item the earlier frame does not have), and the two frames' times.
+pub fn strain_scene(dir: &Path, from: f64, to: f64, view: Option<([f64; 2], [f64; 2])>) -> anyhow::Result<(f64, f64, Scene2)> {
+    use grains_oracle::band::{best_fit_strain, neighbours};
     use grains_service::vtu::Frame;
-    let nearest = |dir: &Path, t: f64| -> anyhow::Result<(f64, u64)> {
+    let nearest = |t: f64| -> anyhow::Result<(f64, u64)> {
         frame_times(dir)?
             .into_iter()
             .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
             .ok_or_else(|| anyhow::anyhow!("{}: no frame to draw", dir.display()))
     };
-    // Each item's strain, in the order of the later frame of `kind` (0 for an item the earlier
-    // frame does not have).
-    let strains = |dir: &Path, kind: &str, steps: (u64, u64), size: f64| -> anyhow::Result<Vec<f64>> {
+    let strains = |kind: &str, steps: (u64, u64), size: f64| -> anyhow::Result<Vec<f64>> {
         let read = |step: u64| Frame::read(&dir.join("frames").join(format!("{kind}_{step:08}.vtu")));
         let (a, b) = (read(steps.0)?, read(steps.1)?);
         let ids = |f: &Frame| -> anyhow::Result<Vec<u64>> {
@@ -129,25 +114,33 @@ pub fn strain_rows(
         }
         Ok(out)
     };
-    let mut rows = Vec::new();
-    for (label, dir) in runs {
-        let (t0, s0) = nearest(dir, from)?;
-        let (t1, s1) = nearest(dir, to)?;
-        let mut scene = frame(dir, s1, view)?;
-        if !scene.grains.is_empty() {
-            let d = 2.0 * scene.grains.iter().map(|g| g.1).sum::<f64>() / scene.grains.len() as f64;
-            for (g, e) in scene.grains.iter_mut().zip(strains(dir, "grains", (s0, s1), d)?) {
-                g.2 = e;
-            }
+    let (t0, s0) = nearest(from)?;
+    let (t1, s1) = nearest(to)?;
+    let mut scene = frame(dir, s1, view)?;
+    if !scene.grains.is_empty() {
+        let d = 2.0 * scene.grains.iter().map(|g| g.1).sum::<f64>() / scene.grains.len() as f64;
+        for (g, e) in scene.grains.iter_mut().zip(strains("grains", (s0, s1), d)?) {
+            g.2 = e;
         }
-        if let Some(&(_, half, _)) = scene.points.first() {
-            for (p, e) in scene.points.iter_mut().zip(strains(dir, "points", (s0, s1), 2.0 * half)?) {
-                p.2 = e;
-            }
-        }
-        scene.bodies.iter_mut().for_each(|b| b.1 = 0.0);
-        rows.push(vec![(format!("{label}, strain from t = {t0:.2} to {t1:.2} s"), scene)]);
     }
+    if let Some(&(_, half, _)) = scene.points.first() {
+        for (p, e) in scene.points.iter_mut().zip(strains("points", (s0, s1), 2.0 * half)?) {
+            p.2 = e;
+        }
+    }
+    scene.bodies.iter_mut().for_each(|b| b.1 = 0.0);
+    Ok((t0, t1, scene))
+}
+
+/// Incremental-strain pictures (as Chen 2021 Figs. 11, 18 and 24): one row per run of `runs`
+/// (label, [`strain_scene`]'s frames' times and scene), dark blue no strain, yellow the 98th
+/// percentile of all the panels' strains or more. Into `<out>/<stem>.png`, listed under `part`.
+pub fn strain_rows(part: &mut Part, out: &Path, stem: &str, caption: &str, runs: Vec<(&str, (f64, f64, Scene2))>) -> anyhow::Result<()> {
+    use grains_oracle::band::percentile;
+    let mut rows: Vec<Vec<(String, Scene2)>> = runs
+        .into_iter()
+        .map(|(label, (t0, t1, scene))| vec![(format!("{label}, strain from t = {t0:.2} to {t1:.2} s"), scene)])
+        .collect();
     let all: Vec<f64> = rows
         .iter()
         .flatten()

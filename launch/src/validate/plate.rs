@@ -5,8 +5,9 @@
 //! the plate's force against its depth for both, the DEM on `--packings` beds (default 2). The
 //! continuum's curve is a prediction (its friction angle and stiffness come from another test,
 //! not from this one); the check compares it with the DEM's mean over the second half of the
-//! travel. Chen's hybrid (the continuum turning discrete
-//! where the bands form) is not built into runs, so its third curve is not here.
+//! travel. Then §6.3.1's far-field loading: the same on packing 1 with the left wall pushed in
+//! at 5 cm/s, the plate's forces and the strain pictures. Chen's hybrid (the continuum turning
+//! discrete where the bands form) is not built into runs, so its third curve is not here.
 
 use super::args::ValidateArgs;
 use super::packings;
@@ -68,20 +69,19 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     // Each DEM bed cut at TOP, the plate GAP above it (outline: vertices + its 0.5-mm radius).
     let (x0, x1) = (CENTRE - 0.5 * B + 0.0005, CENTRE + 0.5 * B - 0.0005);
     let (y0, y1) = (TOP + GAP + 0.0005, TOP + GAP + 2.0 * HALF_HEIGHT - 0.0005);
+    let dem_bed = |seed: u64| -> anyhow::Result<Vec<String>> {
+        let packing = packings::plate(args, seed)?;
+        Ok(vec![
+            format!("body.0.packing={:?}", packing.display().to_string()),
+            format!("body.0.max=[{WIDTH},{TOP}]"),
+            format!("rigid.0.vertices=[[{x0},{y0}],[{x1},{y0}],[{x1},{y1}],[{x0},{y1}]]"),
+            format!("run.duration={END:.3}"),
+        ])
+    };
     let mut dems = Vec::new();
     for seed in 1..=seeds {
-        let packing = packings::plate(args, seed)?;
         tracing::info!("validate: plate, DEM bed of packing {seed}");
-        let run = finished(
-            args,
-            &args.scenes.join(DEM),
-            vec![
-                format!("body.0.packing={:?}", packing.display().to_string()),
-                format!("body.0.max=[{WIDTH},{TOP}]"),
-                format!("rigid.0.vertices=[[{x0},{y0}],[{x1},{y0}],[{x1},{y1}],[{x0},{y1}]]"),
-                format!("run.duration={END:.3}"),
-            ],
-        )?;
+        let run = finished(args, &args.scenes.join(DEM), dem_bed(seed)?)?;
         let curve = bearing(&run.dir, 0)?;
         dems.push((run, curve));
     }
@@ -165,31 +165,63 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         mpm.wall
     );
     let view = Some(([CENTRE - 2.5 * B, 0.0], [CENTRE + 2.5 * B, TOP + 0.012]));
-    pictures::last_frames(
-        &mut part,
-        &args.out,
-        "plate_end",
-        "The bed under the plate at the end of its travel, coloured by speed (dark blue at rest, yellow the fastest): DEM of \
-         packing 1 (top), continuum (bottom)",
-        &[
-            vec![("DEM, packing 1".to_string(), dems[0].0.dir.as_path())],
-            vec![("continuum".to_string(), mpm.dir.as_path())],
-        ],
-        view,
-        crate::render::Colour::Speed,
-    )?;
     // The bands (Chen's Fig. 24): the strain from about 2.5 mm of depth to the end.
-    let from = (GAP + 0.0025) / 0.05;
+    let strain = |dir: &Path| pictures::strain_scene(dir, (GAP + 0.0025) / 0.05, END, view);
     pictures::strain_rows(
         &mut part,
         &args.out,
         "plate_strain",
         "Incremental strain under the plate (Cundall's best-fit strain, dark blue none, yellow the 98th percentile and more): \
          DEM of packing 1 (top), continuum (bottom)",
-        &[("DEM, packing 1", dems[0].0.dir.as_path()), ("continuum", mpm.dir.as_path())],
-        from,
-        END,
-        view,
+        vec![("DEM, packing 1", strain(&dems[0].0.dir)?), ("continuum", strain(&mpm.dir)?)],
+    )?;
+    // §6.3.1: far-field loading, the left wall pushed in at the plate's speed (the DEM's
+    // wall.1, the continuum's grid-node wall.0), on packing 1.
+    tracing::info!("validate: plate, the left wall moving (§6.3.1)");
+    let push = format!("[{},0.0]", 0.05);
+    let mut far = dem_bed(1)?;
+    far.push(format!("wall.1.velocity={push}"));
+    let dem_far = finished(args, &args.scenes.join(DEM), far)?;
+    let mpm_far = finished(args, &mpm_path, vec![format!("wall.0.velocity={push}")])?;
+    let forces = |dir: &Path, k: usize| -> anyhow::Result<(f64, f64)> {
+        let path = dir.join("bodies.csv");
+        let t = MetricsTable::parse(&std::fs::read_to_string(&path)?, &path)?;
+        let (y, fx, fy) = (
+            t.column(&format!("body{k}_y"))?,
+            t.column(&format!("body{k}_fx"))?,
+            t.column(&format!("body{k}_fy"))?,
+        );
+        let depth = |y: f64| TOP - (y - HALF_HEIGHT);
+        let fx: Vec<(f64, f64)> = y.iter().zip(&fx).map(|(y, f)| (depth(*y), *f)).collect();
+        let fy: Vec<(f64, f64)> = y.iter().zip(&fy).map(|(y, f)| (depth(*y), *f)).collect();
+        Ok((mean_over(&fx, a, b), mean_over(&fy, a, b)))
+    };
+    let _ = writeln!(
+        md,
+        "Far-field loading (§6.3.1): the left wall moves right at 5 cm/s through the whole run (10 mm by its end), packing 1 \
+         and the continuum. The plate's mean force over {:.0}–{:.0} mm (x, y) [N/m]:\n\n| run | still walls | left wall \
+         moving |\n|---|---:|---:|",
+        1e3 * a,
+        1e3 * b
+    );
+    for (label, still, moving, k) in [
+        ("DEM, packing 1", &dems[0].0.dir, &dem_far.dir, 0),
+        ("continuum", &mpm.dir, &mpm_far.dir, 1),
+    ] {
+        let ((sx, sy), (mx, my)) = (forces(still, k)?, forces(moving, k)?);
+        let _ = writeln!(md, "| {label} | ({sx:.1}, {sy:.1}) | ({mx:.1}, {my:.1}) |");
+    }
+    let _ = writeln!(md);
+    pictures::strain_rows(
+        &mut part,
+        &args.out,
+        "plate_strain_far_field",
+        "Incremental strain with the left wall pushed in at 5 cm/s (§6.3.1, Chen's Fig. 25): DEM of packing 1 (top), \
+         continuum (bottom)",
+        vec![
+            ("DEM, left wall moving", strain(&dem_far.dir)?),
+            ("continuum, left wall moving", strain(&mpm_far.dir)?),
+        ],
     )?;
     part.md = md;
     Ok(part)
