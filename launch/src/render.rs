@@ -1,7 +1,8 @@
 //! `grains render`: a picture of a run's frame as PNG, for people who watch flows rather than
 //! read them. Grains are drawn as disks of their own radius (2D, or the x–y projection of 3D
 //! spheres), material points as dots of half their cell's point spacing; colour by model
-//! (points blue, grains sand) or by speed. The view is the scene's domain, x to the right and
+//! (points blue, grains sand), by speed or by the incremental strain since the frame before
+//! (where shear bands form). The view is the scene's domain, x to the right and
 //! y up, at `--width` pixels across.
 
 use anyhow::{Context, bail};
@@ -44,14 +45,23 @@ pub enum Colour {
     /// Speed |v|, from dark blue (at rest) to yellow (the fastest material of the frame, or of
     /// all the frames drawn with `--every`).
     Speed,
+    /// Incremental strain since the frame written before (with `--every`, since the frame
+    /// drawn before): Cundall's best-fit deviatoric strain of each grain or point with its
+    /// neighbours (Chen 2021 App. A), from dark blue (none) to yellow (the 98th percentile of
+    /// the picture's strains, or of all the pictures' with `--every`, and above). Shear bands
+    /// show; the first frame has none. In 2D (a 3D run's is its x–y projection's).
+    Strain,
 }
+
+/// The 98th percentile of the strains of `pictures` (made by [`strain_frame`]): yellow on the
+/// strain colour scale.
+const STRAIN_TOP: f64 = 0.98;
 
 /// What a picture shows: the view's box [m] and the material in it.
 pub struct Scene2 {
     pub min: [f64; 2],
     pub max: [f64; 2],
-    /// Grains: centre [m], radius [m], speed [m/s] (what `Colour::Speed` draws; a strain picture
-    /// of `grains validate` puts the strain there).
+    /// Grains: centre [m], radius [m], speed [m/s] (in a [`strain_frame`], the strain).
     pub grains: Vec<([f64; 2], f64, f64)>,
     /// Points: centre [m], half their spacing [m], speed [m/s].
     pub points: Vec<([f64; 2], f64, f64)>,
@@ -91,21 +101,36 @@ pub fn render(args: &RenderArgs) -> anyhow::Result<Vec<PathBuf>> {
             Some(s) => s,
             None => *frame_steps(&args.run)?.last().expect("frame_steps is never empty"),
         };
-        let picture = frame(&args.run, step, view)?;
         let out = args
             .out
             .clone()
             .unwrap_or_else(|| args.run.join("frames").join(format!("render_{step:08}.png")));
-        let fastest = picture.fastest();
-        write_png(&picture, args.colour, fastest, args.width, &out)?;
+        let (picture, top) = if args.colour == Colour::Strain {
+            let before = frame_steps(&args.run)?.into_iter().take_while(|&s| s < step).last().unwrap_or(step);
+            let picture = strain_frame(&args.run, before, step, view)?;
+            let top = strain_top(std::slice::from_ref(&picture));
+            (picture, top)
+        } else {
+            let picture = frame(&args.run, step, view)?;
+            let fastest = picture.fastest();
+            (picture, fastest)
+        };
+        write_png(&picture, args.colour, top, args.width, &out)?;
         return Ok(vec![out]);
     };
     let steps: Vec<u64> = frame_steps(&args.run)?.into_iter().step_by(every as usize).collect();
-    // One speed scale for the whole film: a colour means the same speed in every picture.
-    let fastest = match args.colour {
-        Colour::Speed => steps
-            .iter()
-            .map(|&s| frame(&args.run, s, view).map(|f| f.fastest()))
+    // Each picture's strain since the one drawn before it.
+    let picture = |k: usize| match args.colour {
+        Colour::Strain => strain_frame(&args.run, steps[k.saturating_sub(1)], steps[k], view),
+        _ => frame(&args.run, steps[k], view),
+    };
+    // One scale for the whole film: a colour means the same speed (strain) in every picture.
+    let top = match args.colour {
+        Colour::Speed => (0..steps.len())
+            .map(|k| picture(k).map(|f| f.fastest()))
+            .try_fold(0.0, |m, f| f.map(|f| f64::max(m, f)))?,
+        Colour::Strain => (0..steps.len())
+            .map(|k| picture(k).map(|f| strain_top(std::slice::from_ref(&f))))
             .try_fold(0.0, |m, f| f.map(|f| f64::max(m, f)))?,
         Colour::Model => 0.0,
     };
@@ -117,7 +142,7 @@ pub fn render(args: &RenderArgs) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     for (k, &step) in steps.iter().enumerate() {
         let out = dir.join(format!("frame_{step:08}.png"));
-        write_png(&frame(&args.run, step, view)?, args.colour, fastest, args.width, &out)?;
+        write_png(&picture(k)?, args.colour, top, args.width, &out)?;
         tracing::info!("render: {}/{} pictures", k + 1, steps.len());
         written.push(out);
     }
@@ -195,6 +220,63 @@ pub fn frame(run: &Path, step: u64, view: Option<([f64; 2], [f64; 2])>) -> anyho
     })
 }
 
+/// Cundall's best-fit deviatoric strain of each item of frame `after` since frame `before`
+/// (items matched by their `id`, each fitted with its neighbours within `reach` in `before`;
+/// `grains_oracle::band`), in `after`'s order; 0 for an item `before` does not have.
+pub fn strain_between(before: &Frame, after: &Frame, reach: f64) -> anyhow::Result<Vec<f64>> {
+    use grains_oracle::band::{best_fit_strain, neighbours};
+    let ids = |f: &Frame| -> anyhow::Result<Vec<u64>> {
+        Ok(f.array("id")
+            .context("a frame without an id array")?
+            .iter()
+            .map(|&i| i as u64)
+            .collect())
+    };
+    let then: std::collections::HashMap<u64, [f64; 3]> = ids(before)?.into_iter().zip(before.points.iter().copied()).collect();
+    let (mut x0, mut x1, mut at) = (Vec::new(), Vec::new(), Vec::new());
+    for (k, (id, x)) in ids(after)?.into_iter().zip(&after.points).enumerate() {
+        if let Some(p) = then.get(&id) {
+            x0.push([p[0], p[1]]);
+            x1.push([x[0], x[1]]);
+            at.push(k);
+        }
+    }
+    let mut out = vec![0.0; after.points.len()];
+    for (e, k) in best_fit_strain(&x0, &x1, &neighbours(&x0, reach)).into_iter().zip(at) {
+        out[k] = e;
+    }
+    Ok(out)
+}
+
+/// The picture of step `step` of a run (as [`frame`]) with each grain's and point's strain
+/// since step `since` in place of its speed ([`strain_between`]: grains with their neighbours
+/// within 1.5 mean diameters, points within 1.5 spacings); the bodies carry none.
+pub fn strain_frame(run: &Path, since: u64, step: u64, view: Option<([f64; 2], [f64; 2])>) -> anyhow::Result<Scene2> {
+    let mut picture = frame(run, step, view)?;
+    let read = |name: &str, s: u64| Frame::read(&run.join("frames").join(format!("{name}_{s:08}.vtu")));
+    if !picture.grains.is_empty() {
+        let d = 2.0 * picture.grains.iter().map(|g| g.1).sum::<f64>() / picture.grains.len() as f64;
+        let e = strain_between(&read("grains", since)?, &read("grains", step)?, 1.5 * d)?;
+        picture.grains.iter_mut().zip(e).for_each(|(g, e)| g.2 = e);
+    }
+    if let Some(&(_, half, _)) = picture.points.first() {
+        let e = strain_between(&read("points", since)?, &read("points", step)?, 3.0 * half)?;
+        picture.points.iter_mut().zip(e).for_each(|(p, e)| p.2 = e);
+    }
+    picture.bodies.iter_mut().for_each(|b| b.1 = 0.0);
+    Ok(picture)
+}
+
+/// The top of the strain colour scale of `pictures` ([`strain_frame`]s): the
+/// [`STRAIN_TOP`] quantile of all their strains.
+pub fn strain_top(pictures: &[Scene2]) -> f64 {
+    let all: Vec<f64> = pictures
+        .iter()
+        .flat_map(|p| p.grains.iter().chain(&p.points).map(|m| m.2))
+        .collect();
+    grains_oracle::band::percentile(&all, STRAIN_TOP)
+}
+
 /// Draws `view` into the PNG `out`, `width` pixels across; speeds are coloured against
 /// `fastest`.
 pub fn write_png(view: &Scene2, colour: Colour, fastest: f64, width: u32, out: &Path) -> anyhow::Result<()> {
@@ -210,12 +292,19 @@ const LABEL: u32 = 26;
 
 /// A grid of labelled pictures (`rows` of panels, each `width` pixels across, all of the
 /// first panel's aspect) in the PNG `out`, for side-by-side comparisons (`grains validate`).
+/// Speeds are coloured against the fastest material of all the panels.
 pub fn panels(rows: &[Vec<(String, Scene2)>], colour: Colour, width: u32, out: &Path) -> anyhow::Result<()> {
+    let fastest = rows.iter().flatten().map(|(_, v)| v.fastest()).fold(0.0, f64::max);
+    panels_scaled(rows, colour, fastest, width, out)
+}
+
+/// [`panels`] with the top of the colour scale given (`top`: the speed or strain drawn yellow).
+pub fn panels_scaled(rows: &[Vec<(String, Scene2)>], colour: Colour, top: f64, width: u32, out: &Path) -> anyhow::Result<()> {
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir)?;
     }
     let root = BitMapBackend::new(out, panels_size(rows, width)?).into_drawing_area();
-    draw_panels(rows, colour, width, &root).with_context(|| format!("writing {}", out.display()))
+    draw_panels(rows, colour, top, width, &root).with_context(|| format!("writing {}", out.display()))
 }
 
 /// The size of [`panels`]' picture.
@@ -226,17 +315,16 @@ pub fn panels_size(rows: &[Vec<(String, Scene2)>], width: u32) -> anyhow::Result
     Ok((cols * w, rows.len() as u32 * (h + LABEL)))
 }
 
-/// Draws [`panels`]' grid on `root`; speeds are coloured against the fastest material of all
-/// the panels.
+/// Draws [`panels`]' grid on `root`, speeds (strains) coloured against `top`.
 pub fn draw_panels<DB: DrawingBackend>(
     rows: &[Vec<(String, Scene2)>],
     colour: Colour,
+    top: f64,
     width: u32,
     root: &DrawingArea<DB, plotters::coord::Shift>,
 ) -> anyhow::Result<()> {
     let first = &rows.first().and_then(|r| r.first()).context("no panel to draw")?.1;
     let (w, h) = size(first, width);
-    let fastest = rows.iter().flatten().map(|(_, v)| v.fastest()).fold(0.0, f64::max);
     crate::report::chart::font()?;
     let fail = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing: {e}");
     root.fill(&BACKGROUND).map_err(fail)?;
@@ -246,7 +334,7 @@ pub fn draw_panels<DB: DrawingBackend>(
             let cell = root.clone().shrink((x, y), (w, h + LABEL));
             cell.draw_text(label, &("sans-serif", 18).into_font().color(&BLACK), (6, 4))
                 .map_err(fail)?;
-            draw(view, colour, fastest, &cell.clone().shrink((0, LABEL), (w, h)))?;
+            draw(view, colour, top, &cell.clone().shrink((0, LABEL), (w, h)))?;
         }
     }
     root.present().map_err(fail)?;
@@ -341,7 +429,7 @@ pub fn draw<DB: DrawingBackend>(
     };
     let paint = |base: RGBColor, speed: f64| match colour {
         Colour::Model => base,
-        Colour::Speed => ramp(if fastest > 0.0 { speed / fastest } else { 0.0 }),
+        Colour::Speed | Colour::Strain => ramp(if fastest > 0.0 { (speed / fastest).min(1.0) } else { 0.0 }),
     };
     let fail = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing: {e}");
     root.fill(&BACKGROUND).map_err(fail)?;
@@ -405,6 +493,7 @@ mod tests {
         draw_panels(
             &rows,
             Colour::Model,
+            0.0,
             1000,
             &BitMapBackend::with_buffer(&mut px, (w, h)).into_drawing_area(),
         )
@@ -488,6 +577,37 @@ mod tests {
 
     /// A rigid body's outline, a 20 mm square from (0.04, 0.02) at 1000 px across 0.1 m, is
     /// painted grey over its 200 × 200 px, not outside it.
+    /// A square lattice sheared uniformly by γ (x += γ y) has e_d = γ / √2 at every point (a
+    /// homogeneous deformation is fitted exactly), the points matched by id whatever their
+    /// order; a point the earlier frame lacks has none.
+    #[test]
+    fn a_uniform_shear_gives_its_deviatoric_strain_to_every_point() {
+        use grains_service::vtu::Frame;
+        let gamma = 0.02;
+        let sites: Vec<[f64; 3]> = (0..100).map(|k| [(k % 10) as f64 * 1e-3, (k / 10) as f64 * 1e-3, 0.0]).collect();
+        let before = Frame {
+            points: sites.clone(),
+            arrays: vec![("id".into(), 1, (0..100).map(|k| k as f64).collect())],
+            cell_ends: Vec::new(),
+        };
+        // The later frame lists the points backwards and has one more (id 100).
+        let mut points: Vec<[f64; 3]> = sites.iter().rev().map(|x| [x[0] + gamma * x[1], x[1], 0.0]).collect();
+        points.push([0.02, 0.02, 0.0]);
+        let mut ids: Vec<f64> = (0..100).rev().map(|k| k as f64).collect();
+        ids.push(100.0);
+        let after = Frame {
+            points,
+            arrays: vec![("id".into(), 1, ids)],
+            cell_ends: Vec::new(),
+        };
+        let e = super::strain_between(&before, &after, 1.5e-3).unwrap();
+        assert_eq!(e.len(), 101);
+        assert_eq!(e[100], 0.0, "a point without a past has no strain");
+        for (k, e) in e[..100].iter().enumerate() {
+            assert!((e - gamma / 2f64.sqrt()).abs() < 1e-9, "point {k}: {e}");
+        }
+    }
+
     #[test]
     fn a_rigid_body_draws_as_its_outline() {
         let view = Scene2 {

@@ -1,5 +1,5 @@
 //! Issue 24: `grains render --every K` of a real run draws every K-th frame and, with ffmpeg,
-//! films them. (The pixels of a drawing are checked by `grains_launch::render`'s unit tests.)
+//! films them; `--colour strain` draws a run's incremental strain. (The pixels of a drawing are checked by `grains_launch::render`'s unit tests.)
 
 use grains_system_tests::*;
 use std::process::Command;
@@ -61,5 +61,15 @@ fn render_every_other_frame_of_a_hybrid_run_draws_them_and_films_them() {
         .output()
         .expect("ffprobe");
     assert_eq!(String::from_utf8_lossy(&probe.stdout).trim(), "h264,302,3");
+    // The strain since the frame before, of the run's own grains and points (matched by the
+    // ids its frames carry; the strain's arithmetic is the unit test's).
+    let strain_png = out.join("strain.png");
+    let strain = Command::new(bin("grains"))
+        .args(["render", dir.to_str().unwrap(), "--colour", "strain", "--out"])
+        .arg(&strain_png)
+        .output()
+        .expect("grains render --colour strain");
+    assert!(strain.status.success(), "{}", String::from_utf8_lossy(&strain.stderr));
+    assert_eq!(&std::fs::read(&strain_png).unwrap()[1..4], b"PNG", "not a PNG");
     std::fs::remove_dir_all(&out).unwrap();
 }

@@ -29,12 +29,12 @@ const GAP: f64 = 0.0015;
 /// continuum scene's is the same).
 const END: f64 = (GAP + DEPTH) / 0.05 + 0.01;
 
-/// The plate's (depth below [`TOP`], upward force) of a run, per macro-step; `k` the plate's
-/// body index in `bodies.csv`.
-fn bearing(dir: &Path, k: usize) -> anyhow::Result<Vec<(f64, f64)>> {
+/// The plate's (depth below [`TOP`], force along `axis`: "x" or "y") of a run, per
+/// macro-step; `k` the plate's body index in `bodies.csv`.
+fn bearing(dir: &Path, k: usize, axis: &str) -> anyhow::Result<Vec<(f64, f64)>> {
     let path = dir.join("bodies.csv");
     let t = MetricsTable::parse(&std::fs::read_to_string(&path)?, &path)?;
-    let (y, f) = (t.column(&format!("body{k}_y"))?, t.column(&format!("body{k}_fy"))?);
+    let (y, f) = (t.column(&format!("body{k}_y"))?, t.column(&format!("body{k}_f{axis}"))?);
     Ok(y.iter().zip(&f).map(|(y, f)| (TOP - (y - HALF_HEIGHT), *f)).collect())
 }
 
@@ -82,11 +82,11 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     for seed in 1..=seeds {
         tracing::info!("validate: plate, DEM bed of packing {seed}");
         let run = finished(args, &args.scenes.join(DEM), dem_bed(seed)?)?;
-        let curve = bearing(&run.dir, 0)?;
+        let curve = bearing(&run.dir, 0, "y")?;
         dems.push((run, curve));
     }
     let mpm = finished(args, &mpm_path, Vec::new())?;
-    let continuum = bearing(&mpm.dir, 1)?;
+    let continuum = bearing(&mpm.dir, 1, "y")?;
     let gamma = {
         let m = &mpm_scene.materials[mpm_scene.bodies[0].material];
         m.density * m.mpm.as_ref().map_or(1.0, |m| m.packing) * 9.81
@@ -184,17 +184,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let dem_far = finished(args, &args.scenes.join(DEM), far)?;
     let mpm_far = finished(args, &mpm_path, vec![format!("wall.0.velocity={push}")])?;
     let forces = |dir: &Path, k: usize| -> anyhow::Result<(f64, f64)> {
-        let path = dir.join("bodies.csv");
-        let t = MetricsTable::parse(&std::fs::read_to_string(&path)?, &path)?;
-        let (y, fx, fy) = (
-            t.column(&format!("body{k}_y"))?,
-            t.column(&format!("body{k}_fx"))?,
-            t.column(&format!("body{k}_fy"))?,
-        );
-        let depth = |y: f64| TOP - (y - HALF_HEIGHT);
-        let fx: Vec<(f64, f64)> = y.iter().zip(&fx).map(|(y, f)| (depth(*y), *f)).collect();
-        let fy: Vec<(f64, f64)> = y.iter().zip(&fy).map(|(y, f)| (depth(*y), *f)).collect();
-        Ok((mean_over(&fx, a, b), mean_over(&fy, a, b)))
+        Ok((mean_over(&bearing(dir, k, "x")?, a, b), mean_over(&bearing(dir, k, "y")?, a, b)))
     };
     let _ = writeln!(
         md,

@@ -525,42 +525,26 @@ fn rod(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<
     )?;
     // The two coarsest grids: L/d_g = 2 and 1.
     let coarse = ROD_GRIDS.len() - 2..ROD_GRIDS.len();
-    part.check(
-        "bar impact: forces on the points keep energy better than on the nodes at L/d_g = 1–2",
-        "Jiang 2020 §5.4, Fig. 18",
-        coarse
-            .clone()
-            .map(|k| {
-                format!(
-                    "h = {}: {:.2}% vs {:.2}%",
-                    ROD_GRIDS[k],
-                    100.0 * errors[0][k].1,
-                    100.0 * errors[1][k].1
-                )
-            })
-            .collect::<Vec<_>>()
-            .join("; "),
-        "points' error < nodes' error on both",
-        coarse.clone().all(|k| errors[0][k].1.abs() < errors[1][k].1.abs()),
-    );
-    part.check(
-        "bar impact: forces on the points keep energy better than the grid contact (Liu) at L/d_g = 1–2",
-        "Jiang 2020 §5.4, Fig. 18",
-        coarse
-            .clone()
-            .map(|k| {
-                format!(
-                    "h = {}: {:.2}% vs {:.2}%",
-                    ROD_GRIDS[k],
-                    100.0 * errors[0][k].1,
-                    100.0 * errors[2][k].1
-                )
-            })
-            .collect::<Vec<_>>()
-            .join("; "),
-        "points' error < grid contact's error on both",
-        coarse.clone().all(|k| errors[0][k].1.abs() < errors[2][k].1.abs()),
-    );
+    for (k, other, short) in [(1, "on the nodes", "nodes'"), (2, "the grid contact (Liu)", "grid contact's")] {
+        part.check(
+            format!("bar impact: forces on the points keep energy better than {other} at L/d_g = 1–2"),
+            "Jiang 2020 §5.4, Fig. 18",
+            coarse
+                .clone()
+                .map(|g| {
+                    format!(
+                        "h = {}: {:.2}% vs {:.2}%",
+                        ROD_GRIDS[g],
+                        100.0 * errors[0][g].1,
+                        100.0 * errors[k][g].1
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; "),
+            format!("points' error < {short} error on both"),
+            coarse.clone().all(|g| errors[0][g].1.abs() < errors[k][g].1.abs()),
+        );
+    }
     let _ = writeln!(
         md,
         "\nThe paper's measure counts as error the energy an elastic bar keeps as vibration, which 1D theory says stays \
