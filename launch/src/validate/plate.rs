@@ -17,17 +17,20 @@ use super::scenes::plate::{B, CENTRE, DEM, DEPTH, HALF_HEIGHT, MPM, TOP, WIDTH};
 use crate::metrics::MetricsTable;
 use crate::report::Part;
 use crate::report::chart::{Chart, Kind, Series};
+use anyhow::Context as _;
 use std::fmt::Write as _;
 use std::path::Path;
 
 /// The continuum's mean force over the second half of the travel within this share of the
 /// DEM's: the bearing capacity of a calibrated continuum, as predicted, not fitted.
 const TOLERANCE: f64 = 0.3;
-/// The plate starts this far above the bed's top [m].
+/// The plate starts this far above the bed's top [m], and moves down at this speed [m/s]
+/// (Chen's).
 const GAP: f64 = 0.0015;
+const SPEED: f64 = 0.05;
 /// The DEM runs' duration: the gap and [`DEPTH`] at 5 cm/s, and a little more [s] (the
 /// continuum scene's is the same).
-const END: f64 = (GAP + DEPTH) / 0.05 + 0.01;
+const END: f64 = (GAP + DEPTH) / SPEED + 0.01;
 
 /// The plate's (depth below [`TOP`], force along `axis`: "x" or "y") of a run, per
 /// macro-step; `k` the plate's body index in `bodies.csv`.
@@ -44,10 +47,12 @@ fn mean_over(curve: &[(f64, f64)], a: f64, b: f64) -> f64 {
     inside.iter().sum::<f64>() / inside.len().max(1) as f64
 }
 
-pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
-    let mut part = Part::default();
-    let mut md = String::from("## Plate indentation (Chen 2021 §6.3)\n\n");
-    let mpm_path = args.scenes.join(MPM);
+/// The continuum scene in `dir`, once both plate scenes there are checked to be what the part
+/// reads: the bed's top at [`TOP`], the run [`END`] long, each plate [`B`] wide and
+/// 2 [`HALF_HEIGHT`] tall about [`CENTRE`], moving down at [`SPEED`], the continuum's [`GAP`]
+/// above the bed (the DEM's is set by the part).
+fn checked_scenes(dir: &Path) -> anyhow::Result<grains_protocol::scene::Scene> {
+    let mpm_path = dir.join(MPM);
     let mpm_scene = load_with(&mpm_path, &[])?;
     let mpm_top = match mpm_scene.bodies[0].shape {
         grains_protocol::scene::Shape::Box { max, .. } => max[1],
@@ -64,6 +69,42 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         "{}: the run lasts {duration} s, the validation reads it to {END} s",
         mpm_path.display()
     );
+    // Both scenes' plates as the depths are read: B wide, 2 HALF_HEIGHT tall, centred on CENTRE,
+    // down at SPEED; the continuum's starting GAP above the bed (the part sets the DEM's).
+    let dem_scene = load_with(&dir.join(DEM), &[])?;
+    for (scene, k, path) in [(&mpm_scene, 1, &mpm_path), (&dem_scene, 0, &dir.join(DEM))] {
+        let plate = scene.rigids.get(k).context("no plate")?;
+        let span = |axis: usize| {
+            let v = plate.vertices.iter().map(|p| p[axis]);
+            (
+                v.clone().fold(f64::INFINITY, f64::min) - plate.radius,
+                v.fold(f64::NEG_INFINITY, f64::max) + plate.radius,
+            )
+        };
+        let ((left, right), (bottom, top)) = (span(0), span(1));
+        let near = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        let bottom_ok = k == 0 || near(bottom, TOP + GAP);
+        anyhow::ensure!(
+            near(right - left, B)
+                && near(0.5 * (left + right), CENTRE)
+                && near(top - bottom, 2.0 * HALF_HEIGHT)
+                && bottom_ok
+                && plate.velocity == [0.0, -SPEED],
+            "{}: rigid.{k} is not the plate the validation reads ({B} m wide, {} m tall, centred at x = {CENTRE} m, moving at \
+             [0, -{SPEED}] m/s, the continuum's bottom at {} m)",
+            path.display(),
+            2.0 * HALF_HEIGHT,
+            TOP + GAP
+        );
+    }
+    Ok(mpm_scene)
+}
+
+pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
+    let mut md = String::from("## Plate indentation (Chen 2021 §6.3)\n\n");
+    let mpm_path = args.scenes.join(MPM);
+    let mpm_scene = checked_scenes(&args.scenes)?;
     let seeds = args.packings.unwrap_or(2);
     anyhow::ensure!(seeds >= 1, crate::run::BadInput("--packings: at least 1".into()));
     // Each DEM bed cut at TOP, the plate GAP above it (outline: vertices + its 0.5-mm radius).
@@ -166,7 +207,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     );
     let view = Some(([CENTRE - 2.5 * B, 0.0], [CENTRE + 2.5 * B, TOP + 0.012]));
     // The bands (Chen's Fig. 24): the strain from about 2.5 mm of depth to the end.
-    let strain = |dir: &Path| pictures::strain_scene(dir, (GAP + 0.0025) / 0.05, END, view);
+    let strain = |dir: &Path| pictures::strain_scene(dir, (GAP + 0.0025) / SPEED, END, view);
     pictures::strain_rows(
         &mut part,
         &args.out,
@@ -178,7 +219,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     // §6.3.1: far-field loading, the left wall pushed in at the plate's speed (the DEM's
     // wall.1, the continuum's grid-node wall.0), on packing 1.
     tracing::info!("validate: plate, the left wall moving (§6.3.1)");
-    let push = format!("[{},0.0]", 0.05);
+    let push = format!("[{SPEED},0.0]");
     let mut far = dem_bed(1)?;
     far.push(format!("wall.1.velocity={push}"));
     let dem_far = finished(args, &args.scenes.join(DEM), far)?;
@@ -219,6 +260,26 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
 
 #[cfg(test)]
 mod tests {
+    /// The shipped scenes are the ones the part reads (an edited plate or bed would make it
+    /// measure depths from the wrong place).
+    #[test]
+    fn the_shipped_plate_scenes_are_what_the_part_reads() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        super::checked_scenes(&dir).unwrap();
+        // And the check can refuse: another plate speed.
+        let text = std::fs::read_to_string(dir.join(super::MPM)).unwrap();
+        let tmp = std::env::temp_dir().join(format!("grains-plate-check-{}", std::process::id()));
+        std::fs::create_dir_all(&tmp).unwrap();
+        std::fs::write(
+            tmp.join(super::MPM),
+            text.replace("velocity = [0.0, -0.05]", "velocity = [0.0, -0.04]"),
+        )
+        .unwrap();
+        std::fs::copy(dir.join(super::DEM), tmp.join(super::DEM)).unwrap();
+        assert!(super::checked_scenes(&tmp).is_err());
+        std::fs::remove_dir_all(&tmp).unwrap();
+    }
+
     /// The mean over a depth window takes the samples inside it only.
     #[test]
     fn the_mean_force_takes_the_window_s_samples() {
