@@ -1,6 +1,7 @@
 //! Every packing the validation pours, in one place: each is a `grains pack` of a scene with
-//! overrides, kept in `--out` under a name that says what it is, and poured once (later runs
-//! reuse it). Both models of a comparison start from the same packing.
+//! overrides, kept in `--out` under a name that says what it is and the hash of the pour's
+//! scene text, and poured once (later runs of the same pour reuse it). Both models of a
+//! comparison start from the same packing.
 
 use super::args::ValidateArgs;
 use super::scenes::{
@@ -10,13 +11,18 @@ use super::scenes::{
 use anyhow::bail;
 use std::path::PathBuf;
 
-/// A packing poured by `grains pack` from `scene` with `overrides`, kept in `--out` as `name`.
+/// A packing poured by `grains pack` from `scene` with `overrides`, kept in `--out` as `name`
+/// with the hash of the effective scene text before its extension: a changed pour scene or
+/// other overrides pour a new file instead of reusing the old one (the code that pours is not
+/// in the hash: after a change to the DEM, use a new `--out`).
 pub fn poured(args: &ValidateArgs, name: &str, scene: &str, overrides: Vec<String>) -> anyhow::Result<PathBuf> {
-    let path = std::path::absolute(args.out.join(name))?;
+    let scene = args.scenes.join(scene);
+    let name = pour_name(name, &scene, &overrides)?;
+    let path = std::path::absolute(args.out.join(&name))?;
     if !path.exists() {
         tracing::info!("validate: pouring {name} with grains pack");
         crate::pack::pack(&crate::pack::PackArgs {
-            scene: args.scenes.join(scene),
+            scene,
             out: path.clone(),
             friction: None,
             overrides,
@@ -96,6 +102,14 @@ pub fn drum(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
     )
 }
 
+/// `name` with the hash of the effective text of `scene` under `overrides` before its
+/// extension.
+fn pour_name(name: &str, scene: &std::path::Path, overrides: &[String]) -> anyhow::Result<String> {
+    let hash = super::runs::load_with(scene, overrides)?.hash;
+    let (stem, ext) = name.rsplit_once('.').unwrap_or((name, "data"));
+    Ok(format!("{stem}_{hash:016x}.{ext}"))
+}
+
 /// The plate indentation's bed of `seed`: the column's pour over the plate scene's width, a
 /// lattice a third taller than the bed's cut at [`scenes::plate::TOP`].
 pub fn plate(args: &ValidateArgs, seed: u64) -> anyhow::Result<PathBuf> {
@@ -121,4 +135,25 @@ pub fn plate(args: &ValidateArgs, seed: u64) -> anyhow::Result<PathBuf> {
         );
     }
     Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    /// The same pour has the same name; other overrides or another scene text, another one.
+    #[test]
+    fn a_changed_pour_gets_a_new_name() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        let scene = dir.join(super::scenes::column::PACKING);
+        let name = |o: &[&str]| super::pour_name("packing_x.data", &scene, &o.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap();
+        let a = name(&["run.seed=1"]);
+        assert!(a.starts_with("packing_x_") && a.ends_with(".data"), "{a}");
+        assert_eq!(a, name(&["run.seed=1"]));
+        assert_ne!(a, name(&["run.seed=2"]));
+        let tmp = std::env::temp_dir().join(format!("grains-pour-name-{}.toml", std::process::id()));
+        let text = std::fs::read_to_string(&scene).unwrap();
+        std::fs::write(&tmp, text.replace("friction = 0.5", "friction = 0.4")).unwrap();
+        let other = super::pour_name("packing_x.data", &tmp, &["run.seed=1".to_string()]).unwrap();
+        std::fs::remove_file(&tmp).unwrap();
+        assert_ne!(a, other, "a changed pour scene kept its name");
+    }
 }
