@@ -575,8 +575,6 @@ mod tests {
         assert!((lo..=hi).contains(&total), "{total} px painted, two disks are {lo:.0} to {hi:.0}");
     }
 
-    /// A rigid body's outline, a 20 mm square from (0.04, 0.02) at 1000 px across 0.1 m, is
-    /// painted grey over its 200 × 200 px, not outside it.
     /// A square lattice sheared uniformly by γ (x += γ y) has e_d = γ / √2 at every point (a
     /// homogeneous deformation is fitted exactly), the points matched by id whatever their
     /// order; a point the earlier frame lacks has none.
@@ -608,6 +606,8 @@ mod tests {
         }
     }
 
+    /// A rigid body's outline, a 20 mm square from (0.04, 0.02) at 1000 px across 0.1 m, is
+    /// painted grey over its 200 × 200 px, not outside it.
     #[test]
     fn a_rigid_body_draws_as_its_outline() {
         let view = Scene2 {
