@@ -210,8 +210,8 @@ wire_type! {
 }
 
 wire_type! {
-    /// A grain (DEM → oracle) or a material point (MPM → oracle) at an oracle epoch. 88 bytes.
-    "grains.EpochItem.v1",
+    /// A grain (DEM → oracle) or a material point (MPM → oracle) at an oracle epoch. 104 bytes.
+    "grains.EpochItem.v2",
     pub struct EpochItem {
         pub id: u64,
         /// Grain radius [m]; 0 for a material point.
@@ -226,6 +226,11 @@ wire_type! {
         pub flags: u64,
         pub position: [f64; 3],
         pub velocity: [f64; 3],
+        /// A point's accumulated plastic strain and its rate over the last step [1/s], the
+        /// shear-band oracle's inputs (Chen 2021 Alg. 1); 0 for a grain and for a model
+        /// without plasticity.
+        pub plastic_strain: f64,
+        pub plastic_rate: f64,
     }
 }
 

@@ -204,3 +204,75 @@ fn new_points_carry_the_stress_of_the_grains() {
     assert!(failed.is_empty(), "{failed:#?}");
     assert!(rows_checked >= 2, "only {rows_checked} rows of new points");
 }
+
+/// Issue 22: the shear-band oracle (`oracle.kind = "shear_band"`, Chen 2021 Alg. 1 and §4)
+/// between the real solvers, on a plate pushed into a continuum bed
+/// (`tests/scenes/hybrid_band_2d.toml`). The run starts with no grain; the plate reaches the
+/// bed at 0.03 s; an epoch after that finds a band and cuts grains from the scene's packing
+/// into the cells around it. Checked:
+/// - no grain before the plate touches, grains at the end, and the first ones arrive at an
+///   epoch that deletes points;
+/// - every epoch keeps the total mass to round-off (the enrichment's rules, also at the
+///   epochs that only reweigh what crossed a zone's edge: without them the solvers' weights
+///   moved it by 6e-4, measured) and the momentum within 1% of max(|p|, m √(g d));
+/// - the grains stay where the material yields: none in the bottom 2 mm or within 3 mm of a
+///   side wall, the rigid zones of a punch;
+/// - the participants as threads give the same physics.
+#[test]
+fn a_shear_band_turns_the_continuum_discrete_where_it_forms() {
+    const BAND: &str = "tests/scenes/hybrid_band_2d.toml";
+    let _machine = machine();
+    let out = out_dir("shear-band");
+    let out_s = out.to_str().unwrap();
+    let (status, err) = run_to_end(&["run", BAND, "--out", out_s, "--quiet"]);
+    assert!(status.success(), "{err}");
+    let dir = run_dir(&err);
+    let t = metrics(&dir);
+    let col = |name: &str| t.column(name).unwrap_or_else(|e| panic!("{e:#}"));
+    let (step, time, before) = (col("step"), col("time"), col("oracle_mass"));
+    let (dem_items, mpm_items, dem_mass, mpm_mass) = (col("dem_items"), col("mpm_items"), col("dem_mass"), col("mpm_mass"));
+    let first = (0..t.len())
+        .find(|&i| dem_items[i] > 0.0)
+        .expect("the oracle never enriched a band");
+    assert!(
+        time[first] > 0.03,
+        "grains at t = {} s, before the plate reached the bed",
+        time[first]
+    );
+    assert!(
+        before[first] > 0.0 && mpm_items[first] < mpm_items[first - 1],
+        "the grains came outside an epoch"
+    );
+    assert!(dem_items[t.len() - 1] > 100.0, "{} grains at the end", dem_items[t.len() - 1]);
+    let mut epochs = 0;
+    for i in (0..t.len()).filter(|&i| before[i] > 0.0) {
+        epochs += 1;
+        let after = dem_mass[i] + mpm_mass[i];
+        assert!(
+            (after / before[i] - 1.0).abs() < 1e-9,
+            "step {}: mass {} -> {after}",
+            step[i],
+            before[i]
+        );
+        let p = |who: &str| [col(&format!("{who}_px"))[i], col(&format!("{who}_py"))[i]];
+        let (pb, pd, pm) = (p("oracle"), p("dem"), p("mpm"));
+        let dp = (pd[0] + pm[0] - pb[0]).hypot(pd[1] + pm[1] - pb[1]);
+        let scale = pb[0].hypot(pb[1]).max(before[i] * (9.81f64 * 1e-3).sqrt());
+        assert!(dp < 0.01 * scale, "step {}: momentum changed by {dp}, 1% of {scale}", step[i]);
+    }
+    assert_eq!(epochs, t.len() / 10, "an epoch every 10 steps");
+    let last = (0..t.len()).rev().find(|&i| step[i] % 500.0 == 0.0).unwrap();
+    let frame = grains_service::vtu::Frame::read(&dir.join("frames").join(format!("grains_{:08}.vtu", step[last] as u64))).unwrap();
+    for x in &frame.points {
+        assert!(x[1] > 0.002 && x[0] > 0.003 && x[0] < 0.037, "a grain at {x:?}: in a rigid zone");
+    }
+    let (status, err) = run_to_end(&["run", BAND, "--out", out_s, "--quiet", "--transport", "inproc"]);
+    assert!(status.success(), "{err}");
+    let threads = std::fs::read_to_string(run_dir(&err).join("metrics.csv")).unwrap();
+    let processes = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+    assert!(
+        grains_launch::metrics::physics_columns(&processes) == grains_launch::metrics::physics_columns(&threads),
+        "the shear-band run differs between processes and threads"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}

@@ -37,7 +37,7 @@ pub use domain::Domain;
 pub use errors::SceneError;
 pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel, RateFriction};
 pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
-pub use oracle::{Oracle, OracleKind};
+pub use oracle::{Oracle, OracleKind, ShearBand};
 pub use output::Output;
 pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};
 pub use rigid::{Rigid, RigidMotion, check_polygon};
@@ -213,7 +213,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 /// Reads a scene file, applies `--set key=value` overrides (dotted keys, list entries by
 /// index: `body.0.max=[0.1, 0.2]`, values in TOML syntax; see [`Override`]) and validates the
 /// result. Returns the scene and the effective text, which is what a run hands to its
-/// participants: its file paths (`body.N.packing`, `bridge.settings`) are absolute, so that it loads
+/// participants: its file paths (`body.N.packing`, `oracle.packing`, `bridge.settings`) are absolute, so that it loads
 /// wherever it is copied. A file without overrides and without relative paths comes back as it
 /// is, with the hash of its bytes.
 pub fn load_with_overrides(path: &Path, overrides: &[String]) -> Result<(Scene, String), SceneError> {
@@ -253,12 +253,12 @@ pub fn with_overrides(text: &str, path: &Path, hash: u64, overrides: &[String]) 
 }
 
 /// The fields of the schema that name files (relative to the scene file unless absolute):
-/// `body.N.packing` of every body and `bridge.settings`.
+/// `body.N.packing` of every body, `oracle.packing` and `bridge.settings`.
 fn file_fields(doc: &toml::Value) -> Vec<FieldPath> {
     let bodies = doc.get("body").and_then(toml::Value::as_array).map_or(0, Vec::len);
     (0..bodies)
         .map(|i| FieldPath::root("body").index(i).key("packing"))
-        .chain([FieldPath::root("bridge").key("settings")])
+        .chain([FieldPath::root("oracle").key("packing"), FieldPath::root("bridge").key("settings")])
         .collect()
 }
 
@@ -452,7 +452,7 @@ fn periodic_fits(ctx: &Ctx, raw: &raw::RawScene, scene: &Scene) -> Result<(), Sc
         return Err(ctx.err(
             Some(span),
             Some("oracle.kind"),
-            "a hybrid scene on a periodic domain needs `kind = \"fixed\"` (the layered and surface oracles do not yet look across a periodic boundary)".into(),
+            "a hybrid scene on a periodic domain needs `kind = \"fixed\"` (the layered, surface and shear-band oracles do not yet look across a periodic boundary)".into(),
         ));
     }
     Ok(())
@@ -518,6 +518,32 @@ mod tests {
             Some(line + 1),
             "oracle.half_width",
             ">= 0",
+        );
+        // The shear-band oracle's fields: its own only, φ0 and the packing required, the
+        // coefficients positive.
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"surface\"\nc1 = 0.01\n"),
+            Some(line + 1),
+            "oracle.c1",
+            "kind = \"shear_band\"",
+        );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"shear_band\"\npacking = \"good.toml\"\n"),
+            Some(line),
+            "oracle.band_distance",
+            "φ0",
+        );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"shear_band\"\nband_distance = 0.01\npacking = \"none.data\"\n"),
+            Some(line + 2),
+            "oracle.packing",
+            "no packing file",
+        );
+        check_err(
+            &format!("{GOOD}[oracle]\nkind = \"shear_band\"\nband_distance = 0.01\nc_g = 0.0\n"),
+            Some(line + 2),
+            "oracle.c_g",
+            "> 0",
         );
     }
 
@@ -603,10 +629,10 @@ mod tests {
         assert!(e.to_string().contains("100.500000 cells"), "{e}");
         let e = load_with_overrides(&path, &["oracle={kind=\"surface\"}".into()]).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("oracle.kind"), "{e}");
-        // The shear-band oracle is refused by name, with what exists of it.
-        let e = load_with_overrides(&path, &["oracle={kind=\"shear_band\"}".into()]).unwrap_err();
+        // So is the shear-band oracle (its band distance does not wrap either).
+        let band = format!("oracle={{kind=\"shear_band\", band_distance=0.01, packing=\"{}\"}}", path.display());
+        let e = load_with_overrides(&path, &[band]).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("oracle.kind"), "{e}");
-        assert!(e.to_string().contains("validate --part shear"), "{e}");
         // A DEM-only periodic domain needs neither.
         let dem = [
             "domain.max=[0.201,0.08]".into(),

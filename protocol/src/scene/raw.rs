@@ -166,6 +166,12 @@ pub struct RawOracle {
     pub centre: Option<Spanned<f64>>,
     pub half_width: Option<Spanned<f64>>,
     pub max_inertial: Option<Spanned<f64>>,
+    pub c0: Option<Spanned<f64>>,
+    pub c1: Option<Spanned<f64>>,
+    pub c_l: Option<Spanned<f64>>,
+    pub c_g: Option<Spanned<f64>>,
+    pub band_distance: Option<Spanned<f64>>,
+    pub packing: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]

@@ -9,7 +9,7 @@
 //! on every boundary.
 
 use grains_grid::Grid;
-use grains_protocol::scene::{Body, Model, Scene, Shape, WallShape};
+use grains_protocol::scene::{Body, Model, OracleKind, Scene, Shape, WallShape};
 use grains_protocol::wire::{Zone, ZoneCell};
 
 /// Whether the face of a box body on `axis` (the low face when `low`) at coordinate `at` rests
@@ -96,9 +96,22 @@ impl ZoneField {
     /// The layered zones of the scene's hybrid bodies (what the oracle publishes at start):
     /// every cell that overlaps a hybrid body's bounding box, with the zone at its centre.
     /// Where bodies overlap, the most discrete zone wins.
+    /// With `oracle.kind = "shear_band"` every cell of the grid is continuum instead (Chen 2021:
+    /// the run starts as a continuum, grains come only where a band forms).
     pub fn layered(scene: &Scene) -> Self {
         let (grid, _) = crate::grid::scene_grid(scene);
         let cells = cell_grid(&grid, scene.dim());
+        if scene.oracle.as_ref().is_some_and(|o| o.kind == OracleKind::ShearBand) {
+            let zones = (0..cells.nodes.iter().product::<u64>())
+                .map(|cell| ZoneCell {
+                    cell,
+                    zone: Zone::Continuum as u32,
+                    _pad: 0,
+                    distance: f64::INFINITY,
+                })
+                .collect();
+            return ZoneField { cells, zones };
+        }
         // Interface in the middle of the band: negative on the discrete side.
         let (begin, end) = band(scene);
         let interface = 0.5 * (begin + end);

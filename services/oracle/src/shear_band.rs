@@ -142,7 +142,7 @@ pub fn window(c: f64, max_shear_rate: f64) -> f64 {
 /// strain over the last τ_l (§3.2). Points are followed by id (Lagrangian: a point that has
 /// moved across cells keeps its history; a point that is new since a record has none, and
 /// counts from its first record).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct RecentStrain {
     /// (time, (id, accumulated plastic strain) sorted by id), oldest first.
     records: VecDeque<(f64, Vec<(u64, f64)>)>,
@@ -193,7 +193,7 @@ impl RecentStrain {
 
 /// Alg. 1 line 7: the flagged set is a band once it is non-empty and has not changed (no cell
 /// added or removed) for τ_g.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Persistence {
     flagged: Vec<bool>,
     since: f64,

@@ -336,6 +336,7 @@ impl<S: Space> Solver for DemSolver<S> {
             flags: if g.frozen[i] { grains_protocol::wire::EPOCH_FIXED } else { 0 },
             position: S::to_array(g.x[i]),
             velocity: S::to_array(g.v[i]),
+            ..EpochItem::default()
         }));
     }
 

@@ -424,6 +424,8 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             flags: 0,
             position: S::to_array(p.x[k]),
             velocity: S::to_array(p.v[k]),
+            plastic_strain: p.plastic_strain[k],
+            plastic_rate: p.plastic_rate[k],
         }));
     }
 

@@ -10,10 +10,15 @@
 //! point (`grains/mpm/epoch`) of that step, and answers with the new zones and, per solver,
 //! the items to delete and to create. Its summary of an epoch step carries the total mass and
 //! momentum before the epoch (the solvers' summaries of the same step, those after it) and
-//! the epoch's time as its compute time; on other steps mass and momentum are 0.
+//! the epoch's time as its compute time; on other steps mass and momentum are 0. With
+//! `"shear_band"` every cell starts continuum and the epochs look for a shear band in the
+//! points' plastic strain instead ([`band`], Chen 2021 Alg. 1 and §4).
+
+pub mod band;
 
 use anyhow::bail;
 use grains_grid::{D2, D3};
+use grains_oracle::band_epoch;
 use grains_oracle::epoch::{self, Grain, Point, Settings};
 use grains_protocol::Role;
 use grains_protocol::names;
@@ -38,8 +43,12 @@ pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneErr
     };
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
-        Some(kind @ (OracleKind::Surface | OracleKind::Layered)) => {
-            let name = if kind == OracleKind::Surface { "surface" } else { "layered" };
+        Some(kind @ (OracleKind::Surface | OracleKind::Layered | OracleKind::ShearBand)) => {
+            let name = match kind {
+                OracleKind::Surface => "surface",
+                OracleKind::Layered => "layered",
+                _ => "shear_band",
+            };
             if settings(scene).is_none() {
                 return Err(err(
                     "oracle.kind",
@@ -194,6 +203,8 @@ pub struct OracleState {
     cells: grains_grid::Grid,
     next_ids: (u64, u64),
     rng: grains_grid::rng::Rng,
+    /// `shear_band`: the band's detection (None: the surface or layered oracle).
+    pub band: Option<band::BandState>,
 }
 
 impl OracleState {
@@ -207,6 +218,10 @@ impl OracleState {
             cells: *field.cell_grid(),
             next_ids: (0, 0),
             rng: grains_grid::rng::Rng::new(scene.seed ^ 0x6f72_6163_6c65),
+            band: match scene.oracle.as_ref().map(|o| o.kind) {
+                Some(OracleKind::ShearBand) => Some(band::BandState::new(scene)?),
+                _ => None,
+            },
         })
     }
 
@@ -214,13 +229,20 @@ impl OracleState {
     /// the counts its summary reports between epochs.
     pub fn save(&self, report: &SolverReport) -> anyhow::Result<Vec<u8>> {
         let zones: Vec<u32> = self.zones.iter().map(|z| *z as u32).collect();
-        grains_service::checkpoint::encode(&(zones, self.next_ids, &self.rng, report.n_items, report.n_nodes))
+        let band = self.band.as_ref().map(band::BandState::save);
+        grains_service::checkpoint::encode(&(zones, self.next_ids, &self.rng, report.n_items, report.n_nodes, band))
     }
 
     /// Takes back the state of [`OracleState::save`] (and the summary's counts).
     pub fn restore(&mut self, bytes: &[u8], report: &mut SolverReport) -> anyhow::Result<()> {
-        type Saved = (Vec<u32>, (u64, u64), grains_grid::rng::Rng, u64, u64);
-        let (zones, next_ids, rng, n_items, n_nodes): Saved = grains_service::checkpoint::decode(bytes)?;
+        type Band = (grains_oracle::shear_band::RecentStrain, grains_oracle::shear_band::Persistence, u64);
+        type Saved = (Vec<u32>, (u64, u64), grains_grid::rng::Rng, u64, u64, Option<Band>);
+        let (zones, next_ids, rng, n_items, n_nodes, saved_band): Saved = grains_service::checkpoint::decode(bytes)?;
+        match (&mut self.band, saved_band) {
+            (Some(b), Some(saved)) => b.restore(saved),
+            (None, None) => {}
+            _ => anyhow::bail!("the checkpoint's oracle is not of this scene's kind"),
+        }
         if zones.len() != self.zones.len() {
             anyhow::bail!("the checkpoint has {} zone cells, this scene {}", zones.len(), self.zones.len());
         }
@@ -244,6 +266,24 @@ impl OracleState {
         self.next_ids = (self.next_ids.0.max(max_id(grains)), self.next_ids.1.max(max_id(points)));
         let (nodes, kernel) = grains_service::grid::scene_grid(scene);
         let cells = self.cells;
+        let band_zones = match &mut self.band {
+            Some(b) => match b.detect(&cells, scene.dim(), time, points) {
+                Some(zones) => Some(zones),
+                // No band (yet) and all continuum: nothing to convert.
+                None if self.zones.iter().all(|&z| z == Zone::Continuum) => {
+                    let plan = epoch::Plan {
+                        zones: self.zones.clone(),
+                        ..epoch::Plan::default()
+                    };
+                    return messages(&plan, 0.0, mass, momentum);
+                }
+                // No new band, but the solvers weigh their items by the cell they are in
+                // after every epoch: the zones stay and the enrichment's rules keep the mass
+                // of the grains and points that moved across a zone's edge since the last.
+                None => Some(vec![Zone::Continuum; self.zones.len()]),
+            },
+            None => None,
+        };
         let solid = solid_cells(scene, &cells, time, self.settings.centre + self.settings.half_width);
         let clearance = |x: [f64; 3]| wall_clearance(scene, x, time);
         let input = epoch::Inputs {
@@ -257,9 +297,28 @@ impl OracleState {
             points: &points_in,
             stress: &stress,
         };
-        let plan = match scene.dimension {
-            Dimension::Two => epoch::plan::<D2>(&input, &self.settings, self.next_ids, &mut self.rng),
-            Dimension::Three => epoch::plan::<D3>(&input, &self.settings, self.next_ids, &mut self.rng),
+        let plan = match (&mut self.band, band_zones) {
+            (Some(b), Some(zones)) => {
+                let s = (self.settings.weight, self.settings.grain_density);
+                let (plan, shift) = match scene.dimension {
+                    Dimension::Two => band_epoch::enrich::<D2>(&input, &zones, &b.packing, s, self.next_ids.0),
+                    Dimension::Three => band_epoch::enrich::<D3>(&input, &zones, &b.packing, s, self.next_ids.0),
+                };
+                if !plan.new_grains.is_empty() {
+                    b.enrichments += 1;
+                    tracing::info!(
+                        "shear band at t = {time:.5} s: {} new grains, {} points deleted, the new grains' velocity shifted by {:.2e} m/s to keep the momentum",
+                        plan.new_grains.len(),
+                        plan.delete_points.len(),
+                        shift.iter().map(|c| c * c).sum::<f64>().sqrt()
+                    );
+                }
+                plan
+            }
+            _ => match scene.dimension {
+                Dimension::Two => epoch::plan::<D2>(&input, &self.settings, self.next_ids, &mut self.rng),
+                Dimension::Three => epoch::plan::<D3>(&input, &self.settings, self.next_ids, &mut self.rng),
+            },
         };
         if scene.dim() == 2 && tracing::enabled!(tracing::Level::DEBUG) {
             tracing::debug!("zones of the epoch:\n{}", zone_map(&cells, &plan, &solid, time));
@@ -318,7 +377,8 @@ fn messages(plan: &epoch::Plan, centre: f64, mass: f64, momentum: [f64; 3]) -> E
             cell: c as u64,
             zone: z as u32,
             _pad: 0,
-            distance: plan.distance[c] - centre,
+            // The band's zones carry no distance to a surface.
+            distance: plan.distance.get(c).map_or(f64::INFINITY, |d| d - centre),
         })
         .collect();
     EpochMessages {
