@@ -47,6 +47,8 @@ pub struct ShearBand {
     /// A LAMMPS data file (e.g. written by `grains pack`) in the scene's coordinates: the
     /// grains cut into the band, with its box periodic along the domain's periodic axes.
     pub packing: std::path::PathBuf,
+    /// Kinematic training of the new grains (§4.1.1); on by default.
+    pub training: bool,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -122,6 +124,7 @@ fn shear_band(ctx: &Ctx, o: &RawOracle) -> Result<Option<ShearBand>, SceneError>
         ("c_g", o.c_g.as_ref().map(|v| v.span())),
         ("band_distance", o.band_distance.as_ref().map(|v| v.span())),
         ("packing", o.packing.as_ref().map(|v| v.span())),
+        ("training", o.training.as_ref().map(|v| v.span())),
     ];
     if o.kind.get_ref() != "shear_band" {
         return match ours.iter().find(|(_, s)| s.is_some()) {
@@ -185,5 +188,6 @@ fn shear_band(ctx: &Ctx, o: &RawOracle) -> Result<Option<ShearBand>, SceneError>
         c_g,
         band_distance,
         packing,
+        training: o.training.as_ref().is_none_or(|t| *t.get_ref()),
     }))
 }

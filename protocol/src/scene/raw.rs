@@ -172,6 +172,7 @@ pub struct RawOracle {
     pub c_g: Option<Spanned<f64>>,
     pub band_distance: Option<Spanned<f64>>,
     pub packing: Option<Spanned<String>>,
+    pub training: Option<Spanned<bool>>,
 }
 
 #[derive(Deserialize)]

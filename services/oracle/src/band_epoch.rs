@@ -67,6 +67,9 @@ fn rank(z: Zone) -> u8 {
     }
 }
 
+/// Kinematic training of the grains for the cells that need them ([`enrich`]).
+pub type Train<'a> = &'a mut dyn FnMut(&BTreeSet<usize>) -> Vec<NewGrain>;
+
 /// One enrichment (Chen 2021 §4) to the zones `band`: every cell takes the more discrete of
 /// its previous zone and the band's. Cells that become discrete or hybrid and hold no grains
 /// (under half their points' mass) get the grains of `packing` whose centres lie in them,
@@ -80,12 +83,21 @@ fn rank(z: Zone) -> u8 {
 /// zones come from the band) and that velocity change. `weight` is the points' share w in a
 /// hybrid cell (the grains' 1 − w), `grain_density` the new grains' [kg/m³]. New grains' ids
 /// count up from `next_grain_id`.
+///
+/// With `train`, the new grains are what it returns for the cells that need them (kinematic
+/// training, §4.1.1: the packing taken through the continuum's history), kept where their
+/// centres lie in those cells, clear of the walls and of the grains there. They too take the
+/// points' velocity: the trained velocities (the grains' own, rattling about the continuum's)
+/// moved the total momentum by 2.2 cm/s of the new grains' mass on the plate indentation,
+/// which the correction then put on every new grain, and the plate's force fell for 10 ms
+/// after the enrichment (docs/validation.md).
 pub fn enrich<S: Space>(
     input: &Inputs<'_>,
     band: &[Zone],
     packing: &Packing,
     (weight, grain_density): (f64, f64),
     next_grain_id: u64,
+    train: Option<Train<'_>>,
 ) -> (Plan, [f64; 3]) {
     let (cells, dim) = (input.cells, S::DIM);
     let count: usize = dims(cells, dim).iter().product();
@@ -115,9 +127,15 @@ pub fn enrich<S: Space>(
             .filter(|p| zone_at(p.x) == Zone::Discrete)
             .map(|p| p.id)
             .collect(),
-        new_grains: cut(input, dim, &need, packing),
         zones,
         ..Plan::default()
+    };
+    plan.new_grains = match train {
+        // A trained grain may touch a wall as the training left it (a plate pressing on it);
+        // one cut from the packing as it is must clear the walls.
+        Some(train) if !need.is_empty() => cut(input, dim, &need, train(&need), 0.5),
+        Some(_) => Vec::new(),
+        None => cut(input, dim, &need, packing_grains(dim, &need, input.cells, packing), 1.0),
     };
     let node_mp = momentum_on_nodes::<S>(input.nodes, input.kernel, input.points.iter().map(|p| (p.x, p.mass, p.v)));
     let none = BTreeMap::new();
@@ -130,26 +148,50 @@ pub fn enrich<S: Space>(
     (plan, shift)
 }
 
-/// The packing's grains (velocity zero) whose centres lie in the cells `need`, clear of the
-/// walls by their radius, overlapping no grain of `input`.
-fn cut(input: &Inputs<'_>, dim: usize, need: &BTreeSet<usize>, packing: &Packing) -> Vec<NewGrain> {
-    let (cells, n) = (input.cells, dims(input.cells, dim));
+/// The packing's grains (velocity zero) over the bounding box of the cells `need`.
+fn packing_grains(dim: usize, need: &BTreeSet<usize>, cells: &grains_grid::Grid, packing: &Packing) -> Vec<NewGrain> {
     if need.is_empty() {
         return Vec::new();
     }
+    let (lo, hi) = bounding_box(cells, dim, need);
+    packing
+        .tile(dim, lo, hi)
+        .into_iter()
+        .map(|(x, radius)| NewGrain {
+            id: 0,
+            x,
+            radius,
+            v: [0.0; 3],
+        })
+        .collect()
+}
+
+/// The box around the cells `set`.
+pub fn bounding_box(cells: &grains_grid::Grid, dim: usize, set: &BTreeSet<usize>) -> ([f64; 3], [f64; 3]) {
+    let n = dims(cells, dim);
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for &c in need {
+    for &c in set {
         let corner = cell_corner(cells, n, c);
         for k in 0..3 {
             lo[k] = lo[k].min(corner[k]);
             hi[k] = hi[k].max(if k < dim { corner[k] + cells.h } else { corner[k] });
         }
     }
+    (lo, hi)
+}
+
+/// Of `candidates`, the grains whose centres lie in the cells `need`, `clear` × their radius
+/// from the walls, overlapping no grain of `input`.
+fn cut(input: &Inputs<'_>, dim: usize, need: &BTreeSet<usize>, candidates: Vec<NewGrain>, clear: f64) -> Vec<NewGrain> {
+    let cells = input.cells;
+    if need.is_empty() {
+        return Vec::new();
+    }
+    let (lo, hi) = bounding_box(cells, dim, need);
     // The grains already there, hashed by cells of the largest diameter.
-    let r_max = packing
-        .grains
+    let r_max = candidates
         .iter()
-        .map(|g| g.1)
+        .map(|g| g.radius)
         .chain(input.grains.iter().map(|g| g.radius))
         .fold(0.0, f64::max);
     let size = 2.0 * r_max;
@@ -174,15 +216,10 @@ fn cut(input: &Inputs<'_>, dim: usize, need: &BTreeSet<usize>, packing: &Packing
             })
         })
     };
-    packing
-        .tile(dim, lo, hi)
+    candidates
         .into_iter()
-        .filter(|&(x, r)| cell_of(cells, dim, x).is_some_and(|c| need.contains(&c)) && (input.clearance)(x) >= r && free(x, r))
-        .map(|(x, radius)| NewGrain {
-            id: 0,
-            x,
-            radius,
-            v: [0.0; 3],
+        .filter(|g| {
+            cell_of(cells, dim, g.x).is_some_and(|c| need.contains(&c)) && (input.clearance)(g.x) >= clear * g.radius && free(g.x, g.radius)
         })
         .collect()
 }
@@ -341,6 +378,7 @@ mod tests {
             &packing,
             (s.weight, s.grain_density),
             100,
+            None,
         );
         assert_eq!(plan.zones, band);
         let row_zone = |row: usize| band[row * cells.nodes[0] as usize];
@@ -395,6 +433,7 @@ mod tests {
             &packing,
             (s.weight, s.grain_density),
             10_000,
+            None,
         );
         assert!(!two.new_grains.is_empty());
         for g in &two.new_grains {

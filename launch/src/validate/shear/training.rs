@@ -96,7 +96,7 @@ pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, 
         points: &at.points,
         stress: &no_stress,
     };
-    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, &packing, (WEIGHT, density), 0);
+    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, &packing, (WEIGHT, density), 0, None);
     let before = epoch::totals(&at.cells, 2, &previous, WEIGHT, &[], &at.points);
     let (mut new, mut points) = (Vec::new(), at.points.clone());
     epoch::apply(&at.cells, 2, &plan, WEIGHT, density, &mut new, &mut points);

@@ -37,7 +37,8 @@ fn min_radius(m: &DemMaterial) -> f64 {
     (m.radius - 2.0 * m.radius_std).max(0.05 * m.radius)
 }
 
-fn grain_mass(dim: usize, r: f64, density: f64) -> f64 {
+/// A grain's mass of radius `r` [m] (2D: per metre).
+pub fn grain_mass(dim: usize, r: f64, density: f64) -> f64 {
     if dim == 2 {
         density * std::f64::consts::PI * r * r
     } else {
@@ -164,14 +165,7 @@ pub fn contact_step(scene: &Scene) -> Option<(f64, f64, f64)> {
 /// bodies only the grains of the discrete and hybrid cells of `zones`. Deterministic from the
 /// scene's seed.
 pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result<DemState<S>> {
-    let (params, material_index) = dem_params::<S>(scene);
-    let mut state = DemState::<S> {
-        grains: Grains::default(),
-        walls: Vec::new(),
-        bodies: Vec::new(),
-        params,
-        time: 0.0,
-    };
+    let (mut state, material_index) = bare_state::<S>(scene);
     let mut rng = Rng::new(scene.seed);
     // Per grain: whether it comes from a packing file.
     let mut from_packing = Vec::new();
@@ -194,6 +188,30 @@ pub fn build_state<S: Space>(scene: &Scene, zones: &ZoneField) -> anyhow::Result
     add_rigids(&mut state, scene, &material_index);
     drop_grains_cut_by_walls(&mut state, &from_packing);
     Ok(state)
+}
+
+/// A state with the scene's contact laws, gravity and domain and no grains, walls or bodies,
+/// and each scene material's index among the laws (`u32::MAX`: none).
+fn bare_state<S: Space>(scene: &Scene) -> (DemState<S>, Vec<u32>) {
+    let (params, material_index) = dem_params::<S>(scene);
+    let state = DemState::<S> {
+        grains: Grains::default(),
+        walls: Vec::new(),
+        bodies: Vec::new(),
+        params,
+        time: 0.0,
+    };
+    (state, material_index)
+}
+
+/// The scene's DEM at time 0 with no grains (its walls and rigid bodies, its contact laws),
+/// and each scene material's index among the laws (`u32::MAX`: none): what a caller fills
+/// with grains of its own (the shear-band oracle's kinematic training).
+pub fn grainless_state<S: Space>(scene: &Scene) -> (DemState<S>, Vec<u32>) {
+    let (mut state, material_index) = bare_state::<S>(scene);
+    add_walls(&mut state, scene);
+    add_rigids(&mut state, scene, &material_index);
+    (state, material_index)
 }
 
 /// The DEM parameters of a scene (the contact laws of its DEM materials, gravity, domain,

@@ -5,15 +5,30 @@
 //! ([`grains_oracle::band_epoch::enrich`]) and the points of the discrete ones go. Later
 //! epochs go on detecting: a band that grows enriches again, and no cell goes back.
 //!
-//! Not done here: kinematic training (§4.1.1, `grains_dem::training`, which
-//! `grains validate --part shear` runs in process). The new grains arrive at the packing's
-//! own state with the continuum's velocity.
+//! Kinematic training (§4.1.1, `oracle.training`, on by default): the packing is the material
+//! at time 0, so the grains cut into the band are taken from where the material now in those
+//! cells started (the points' positions at the first epoch, by id), and driven through the
+//! continuum's motion since: a ring one cell wide around them moves with the continuum's
+//! velocity (recorded per cell at every epoch), the grains inside move as grains do, the
+//! scene's walls move as scripted ([`grains_dem::training::train`]). The trained grains that
+//! end in the cells that need them are the new grains, at the continuum's velocity
+//! ([`grains_oracle::band_epoch::enrich`] says why). Their contacts' tangential springs are
+//! not sent (the protocol's new grains carry none).
 
 use grains_grid::Grid;
+use grains_grid::Space;
 use grains_oracle::band_epoch::Packing;
+use grains_oracle::epoch::{NewGrain, cell_of};
 use grains_oracle::shear_band::{self as sb, Coefficients, Persistence, RecentStrain};
-use grains_protocol::scene::{Model, Scene};
+use grains_protocol::scene::{Model, Scene, Shape};
 use grains_protocol::wire::{EPOCH_FIXED, EpochItem, Zone};
+use std::collections::BTreeSet;
+
+/// The continuum's velocity per cell at one epoch: (time, mass-weighted mean velocity, mass).
+type Record = (f64, Vec<[f64; 3]>, Vec<f64>);
+
+/// Most velocity records kept (older ones thinned, as [`RecentStrain`] does).
+const MAX_RECORDS: usize = 256;
 
 /// What the shear-band oracle carries from one epoch to the next.
 #[derive(Clone, Debug)]
@@ -29,6 +44,11 @@ pub struct BandState {
     persistence: Persistence,
     /// Epochs that found a band and enriched it.
     pub enrichments: u64,
+    /// Kinematic training on; the points' positions at the first epoch (sorted by id); the
+    /// continuum's velocity at the epochs.
+    pub training: bool,
+    origin: Vec<(u64, [f64; 3])>,
+    history: Vec<Record>,
 }
 
 impl BandState {
@@ -60,11 +80,25 @@ impl BandState {
                 0.0
             }
         });
+        // The packing's grains inside the hybrid body, as a `packing` of the body takes them
+        // (so that a DEM run of the scene from the same file has the same grains).
+        let inside = |x: [f64; 3]| match body.shape {
+            Shape::Box { min, max } => (0..dim).all(|k| x[k] >= min[k] && x[k] <= max[k]),
+            Shape::Ball { center, radius } => (0..dim).map(|k| (x[k] - center[k]).powi(2)).sum::<f64>() <= radius * radius,
+        };
         let packing = Packing {
             min: std::array::from_fn(|k| data.bounds[k][0]),
             period,
-            grains: data.atoms.iter().map(|a| (a.x, 0.5 * a.diameter)).collect(),
+            grains: data
+                .atoms
+                .iter()
+                .filter(|a| a.kind != 2 && inside(a.x))
+                .map(|a| (a.x, 0.5 * a.diameter))
+                .collect(),
         };
+        if packing.grains.is_empty() {
+            anyhow::bail!("{}: oracle.packing has no grains inside the hybrid body", o.packing.display());
+        }
         Ok(BandState {
             coefficients: Coefficients {
                 c0: o.c0,
@@ -79,6 +113,9 @@ impl BandState {
             recent: RecentStrain::default(),
             persistence: Persistence::default(),
             enrichments: 0,
+            training: o.training,
+            origin: Vec::new(),
+            history: Vec::new(),
         })
     }
 
@@ -87,6 +124,9 @@ impl BandState {
     /// from the record a window τ_l ago.
     pub fn detect(&mut self, cells: &Grid, dim: usize, time: f64, points: &[EpochItem]) -> Option<Vec<Zone>> {
         let points: Vec<&EpochItem> = points.iter().filter(|p| p.flags & EPOCH_FIXED == 0).collect();
+        if self.training {
+            self.record(cells, dim, time, &points);
+        }
         let max_rate = points.iter().map(|p| p.plastic_rate).fold(0.0, f64::max);
         let c = &self.coefficients;
         let (tau_l, tau_g) = (sb::window(c.cl, max_rate), sb::window(c.cg, max_rate));
@@ -104,13 +144,318 @@ impl BandState {
     }
 
     /// What a checkpoint holds of it: the recent strain's records, the persistence's set and
-    /// clock, the enrichments so far.
-    pub fn save(&self) -> (&RecentStrain, &Persistence, u64) {
-        (&self.recent, &self.persistence, self.enrichments)
+    /// clock, the enrichments so far, the training's origins and velocity records.
+    pub fn save(&self) -> Saved {
+        (
+            self.recent.clone(),
+            self.persistence.clone(),
+            self.enrichments,
+            self.origin.clone(),
+            self.history.clone(),
+        )
     }
 
     /// Takes back [`BandState::save`]'s parts.
-    pub fn restore(&mut self, (recent, persistence, enrichments): (RecentStrain, Persistence, u64)) {
-        (self.recent, self.persistence, self.enrichments) = (recent, persistence, enrichments);
+    pub fn restore(&mut self, saved: Saved) {
+        (self.recent, self.persistence, self.enrichments, self.origin, self.history) = saved;
+    }
+
+    /// The points' positions at the first call, and the continuum's velocity per cell now.
+    fn record(&mut self, cells: &Grid, dim: usize, time: f64, points: &[&EpochItem]) {
+        if self.origin.is_empty() {
+            self.origin = points.iter().map(|p| (p.id, p.position)).collect();
+            self.origin.sort_unstable_by_key(|o| o.0);
+        }
+        let count = cells.nodes.iter().take(dim).product::<u64>() as usize;
+        let (mut momentum, mut mass) = (vec![[0.0; 3]; count], vec![0.0; count]);
+        for p in points {
+            if let Some(c) = cell_of(cells, dim, p.position) {
+                (0..3).for_each(|k| momentum[c][k] += p.mass * p.velocity[k]);
+                mass[c] += p.mass;
+            }
+        }
+        let velocity = momentum
+            .iter()
+            .zip(&mass)
+            .map(|(p, &m)| if m > 0.0 { p.map(|c| c / m) } else { [0.0; 3] })
+            .collect();
+        self.history.push((time, velocity, mass));
+        if self.history.len() > MAX_RECORDS {
+            // Keep the newest half as is; thin the older half.
+            let old = self.history.len() / 2;
+            let mut k = 0;
+            self.history.retain(|_| {
+                k += 1;
+                k > old || k % 2 == 1
+            });
+        }
+    }
+
+    /// The continuum's velocity at `x` and `time`: linear in time between the records (the
+    /// first before it, the last after it), in space the mass-weighted bilinear blend of the
+    /// four (2D) or eight cell centres around `x` that hold material, else the nearest cell
+    /// within two that does, else zero.
+    pub fn velocity(&self, cells: &Grid, dim: usize, x: [f64; 3], time: f64) -> [f64; 3] {
+        let h = &self.history;
+        let Some(last) = h.last() else { return [0.0; 3] };
+        let at = |r: &Record| field_at(cells, dim, r, x);
+        let next = h.partition_point(|r| r.0 < time);
+        if next == 0 {
+            return at(&h[0]);
+        }
+        if next == h.len() {
+            return at(last);
+        }
+        let (a, b) = (&h[next - 1], &h[next]);
+        let s = ((time - a.0) / (b.0 - a.0)).clamp(0.0, 1.0);
+        let (va, vb) = (at(a), at(b));
+        std::array::from_fn(|k| (1.0 - s) * va[k] + s * vb[k])
+    }
+
+    /// Kinematic training for an enrichment at `now` of the cells `need` (by the points in
+    /// them now, `points`): the packing's grains where that material started, trained to
+    /// `now` ([`BandState`]'s module doc). Returns them (ids 0..), or none when no point of
+    /// those cells has an origin.
+    pub fn train<S: Space>(
+        &self,
+        scene: &Scene,
+        cells: &Grid,
+        need: &BTreeSet<usize>,
+        points: &[EpochItem],
+        now: f64,
+    ) -> anyhow::Result<Vec<NewGrain>> {
+        let dim = S::DIM;
+        let n: [usize; 3] = std::array::from_fn(|k| if k < dim { cells.nodes[k] as usize } else { 1 });
+        // The cells the material now in `need` started in, and a ring of one cell around them.
+        let mut start = BTreeSet::new();
+        for p in points.iter().filter(|p| p.flags & EPOCH_FIXED == 0) {
+            if cell_of(cells, dim, p.position).is_some_and(|c| need.contains(&c))
+                && let Ok(k) = self.origin.binary_search_by_key(&p.id, |o| o.0)
+                && let Some(c) = cell_of(cells, dim, self.origin[k].1)
+            {
+                start.insert(c);
+            }
+        }
+        if start.is_empty() {
+            return Ok(Vec::new());
+        }
+        let mut ring = BTreeSet::new();
+        for &c in &start {
+            let ijk = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
+            let span = |k: usize| if k < dim { -1i64..=1 } else { 0..=0 };
+            for dz in span(2) {
+                for dy in span(1) {
+                    for dx in span(0) {
+                        let m = [ijk[0] as i64 + dx, ijk[1] as i64 + dy, ijk[2] as i64 + dz];
+                        if (0..3).all(|k| m[k] >= 0 && (m[k] as usize) < n[k]) {
+                            let d = (m[2] as usize * n[1] + m[1] as usize) * n[0] + m[0] as usize;
+                            if !start.contains(&d) {
+                                ring.insert(d);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let all: BTreeSet<usize> = start.union(&ring).copied().collect();
+        let (lo, hi) = grains_oracle::band_epoch::bounding_box(cells, dim, &all);
+        let body = scene
+            .bodies
+            .iter()
+            .find(|b| b.model == Model::Hybrid)
+            .ok_or_else(|| anyhow::anyhow!("no hybrid body"))?;
+        let density = scene.materials[body.material].density;
+        let (mut state, material) = grains_dem_service::setup::grainless_state::<S>(scene);
+        let material = material[body.material];
+        let (mut inside, mut shell) = (0, Vec::new());
+        for (x, r) in self.packing.tile(dim, lo, hi) {
+            let Some(c) = cell_of(cells, dim, x) else { continue };
+            let id = state.grains.len() as u64;
+            if start.contains(&c) {
+                inside += 1;
+            } else if ring.contains(&c) {
+                shell.push(id);
+            } else {
+                continue;
+            }
+            state.grains.push(
+                id,
+                S::from_array(x),
+                r,
+                grains_dem_service::setup::grain_mass(dim, r, density),
+                material,
+            );
+        }
+        let dt = grains_dem_service::setup::dem_dt(scene);
+        let steps = (now / dt).round() as usize;
+        let mut pipe = grains_dem::DemPipeline::<S>::new(scene.threads as usize).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let t0 = std::time::Instant::now();
+        grains_dem::training::train(
+            &mut pipe,
+            &mut state,
+            &shell,
+            |x, t| S::from_array(self.velocity(cells, dim, S::to_array(x), t)),
+            dt,
+            steps,
+        );
+        tracing::info!(
+            "kinematic training: {inside} grains in {} cells, a ring of {} grains, {steps} steps of {dt:e} s: {:.1} s",
+            start.len(),
+            shell.len(),
+            t0.elapsed().as_secs_f64()
+        );
+        let g = &state.grains;
+        Ok((0..g.len())
+            .filter(|&i| shell.binary_search(&g.id[i]).is_err())
+            .map(|i| NewGrain {
+                id: 0,
+                x: S::to_array(g.x[i]),
+                radius: g.radius[i],
+                v: S::to_array(g.v[i]),
+            })
+            .collect())
+    }
+}
+
+/// What [`BandState::save`] gives.
+pub type Saved = (RecentStrain, Persistence, u64, Vec<(u64, [f64; 3])>, Vec<Record>);
+
+/// The velocity of `record`'s field at `x` ([`BandState::velocity`]).
+fn field_at(cells: &Grid, dim: usize, (_, velocity, mass): &Record, x: [f64; 3]) -> [f64; 3] {
+    let n: [i64; 3] = std::array::from_fn(|k| if k < dim { cells.nodes[k] as i64 } else { 1 });
+    let index = |m: [i64; 3]| ((m[2] * n[1] + m[1]) * n[0] + m[0]) as usize;
+    let inside = |m: [i64; 3]| (0..3).all(|k| m[k] >= 0 && m[k] < n[k]);
+    // Cell-centred coordinates: the lower corner cell and the fraction towards the next.
+    let u: [f64; 3] = std::array::from_fn(|k| if k < dim { (x[k] - cells.origin[k]) / cells.h - 0.5 } else { 0.0 });
+    let base: [i64; 3] = u.map(|c| c.floor() as i64);
+    let (mut sum, mut weight) = ([0.0; 3], 0.0);
+    for corner in 0..(1usize << dim) {
+        let mut m = base;
+        let mut w = 1.0;
+        for k in 0..dim {
+            let f = u[k] - base[k] as f64;
+            if corner >> k & 1 == 1 {
+                m[k] += 1;
+                w *= f;
+            } else {
+                w *= 1.0 - f;
+            }
+        }
+        if inside(m) && mass[index(m)] > 0.0 {
+            let c = index(m);
+            w *= mass[c];
+            (0..3).for_each(|k| sum[k] += w * velocity[c][k]);
+            weight += w;
+        }
+    }
+    if weight > 0.0 {
+        return sum.map(|s| s / weight);
+    }
+    let here: [i64; 3] = std::array::from_fn(|k| if k < dim { (u[k] + 0.5).floor() as i64 } else { 0 });
+    let mut best: Option<(i64, usize)> = None;
+    let span = |k: usize| if k < dim { -2i64..=2 } else { 0..=0 };
+    for dz in span(2) {
+        for dy in span(1) {
+            for dx in span(0) {
+                let m = [here[0] + dx, here[1] + dy, here[2] + dz];
+                let d2 = dx * dx + dy * dy + dz * dz;
+                if inside(m) && mass[index(m)] > 0.0 && best.is_none_or(|b| d2 < b.0) {
+                    best = Some((d2, index(m)));
+                }
+            }
+        }
+    }
+    best.map_or([0.0; 3], |(_, c)| velocity[c])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use grains_grid::D2;
+
+    /// Kinematic training takes the packing through the continuum's motion: the test scene's
+    /// bed (no gravity, the plate held above it) translating at v = (2 cm/s, 0) for 0.05 s, as
+    /// the points' velocities record it epoch by epoch. The grains cut for a block of cells
+    /// in its middle are those of the packing where that material started (a cell's width
+    /// behind), moved on by v t = 1 mm (their centroid, within 5%) and moving at v (their mean
+    /// velocity, within 5%). Without training the packing's grains would be where they were,
+    /// at rest (the test fails with `oracle.training = false` set below).
+    #[test]
+    fn trained_grains_follow_the_continuums_motion() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../tests/scenes/hybrid_band_2d.toml");
+        let set = ["gravity=[0.0,0.0]", "wall.3.velocity=[0.0,0.0]"].map(String::from);
+        let (scene, _) = grains_protocol::scene::load_with_overrides(&path, &set).unwrap();
+        let mut band = BandState::new(&scene).unwrap();
+        assert!(band.training);
+        let cells = *grains_service::zones::ZoneField::layered(&scene).cell_grid();
+        let v = [0.02, 0.0, 0.0];
+        // Points on a 1-mm lattice over the bed, each of 1 g, all moving at v.
+        let lattice: Vec<[f64; 3]> = (0..16)
+            .flat_map(|j| (0..40).map(move |i| [(i as f64 + 0.5) * 1e-3, (j as f64 + 0.5) * 1e-3, 0.0]))
+            .collect();
+        let points_at = |t: f64| -> Vec<EpochItem> {
+            lattice
+                .iter()
+                .enumerate()
+                .map(|(k, x)| EpochItem {
+                    id: k as u64,
+                    mass: 1e-3,
+                    share: 1.0,
+                    position: [x[0] + v[0] * t, x[1], 0.0],
+                    velocity: v,
+                    ..EpochItem::default()
+                })
+                .collect()
+        };
+        let every = 10.0 * scene.dt;
+        let end = 0.05;
+        let epochs = (end / every).round() as usize;
+        for k in 1..=epochs {
+            assert!(band.detect(&cells, 2, k as f64 * every, &points_at(k as f64 * every)).is_none());
+        }
+        // The cells whose centres lie in [12, 28] × [4, 12] mm.
+        let need: BTreeSet<usize> = (0..(cells.nodes[0] * cells.nodes[1]) as usize)
+            .filter(|&c| {
+                let x = cells.origin[0] + ((c % cells.nodes[0] as usize) as f64 + 0.5) * cells.h;
+                let y = cells.origin[1] + ((c / cells.nodes[0] as usize) as f64 + 0.5) * cells.h;
+                (0.012..=0.028).contains(&x) && (0.004..=0.012).contains(&y)
+            })
+            .collect();
+        let now = points_at(end);
+        let trained = band.train::<D2>(&scene, &cells, &need, &now, end).unwrap();
+        // Where that material started: the cells of the points' first positions.
+        let start: BTreeSet<usize> = now
+            .iter()
+            .filter(|p| cell_of(&cells, 2, p.position).is_some_and(|c| need.contains(&c)))
+            .filter_map(|p| cell_of(&cells, 2, points_at(every)[p.id as usize].position))
+            .collect();
+        let before: Vec<[f64; 3]> = band
+            .packing
+            .grains
+            .iter()
+            .filter(|(x, _)| cell_of(&cells, 2, *x).is_some_and(|c| start.contains(&c)))
+            .map(|g| g.0)
+            .collect();
+        assert_eq!(
+            trained.len(),
+            before.len(),
+            "the trained grains are the packing's in the start cells"
+        );
+        let mean = |xs: &mut dyn Iterator<Item = [f64; 3]>, n: usize| {
+            let s = xs.fold([0.0; 2], |a, x| [a[0] + x[0], a[1] + x[1]]);
+            [s[0] / n as f64, s[1] / n as f64]
+        };
+        let (c0, c1) = (
+            mean(&mut before.iter().copied(), before.len()),
+            mean(&mut trained.iter().map(|g| g.x), trained.len()),
+        );
+        let moved = [c1[0] - c0[0], c1[1] - c0[1]];
+        assert!(
+            (moved[0] / (v[0] * end) - 1.0).abs() < 0.05 && moved[1].abs() < 0.05 * v[0] * end,
+            "centroid moved {moved:?}, v t = {}",
+            v[0] * end
+        );
+        let u = mean(&mut trained.iter().map(|g| g.v), trained.len());
+        assert!((u[0] / v[0] - 1.0).abs() < 0.05 && u[1].abs() < 0.05 * v[0], "mean velocity {u:?}");
     }
 }

@@ -235,8 +235,7 @@ impl OracleState {
 
     /// Takes back the state of [`OracleState::save`] (and the summary's counts).
     pub fn restore(&mut self, bytes: &[u8], report: &mut SolverReport) -> anyhow::Result<()> {
-        type Band = (grains_oracle::shear_band::RecentStrain, grains_oracle::shear_band::Persistence, u64);
-        type Saved = (Vec<u32>, (u64, u64), grains_grid::rng::Rng, u64, u64, Option<Band>);
+        type Saved = (Vec<u32>, (u64, u64), grains_grid::rng::Rng, u64, u64, Option<band::Saved>);
         let (zones, next_ids, rng, n_items, n_nodes, saved_band): Saved = grains_service::checkpoint::decode(bytes)?;
         match (&mut self.band, saved_band) {
             (Some(b), Some(saved)) => b.restore(saved),
@@ -297,21 +296,28 @@ impl OracleState {
             points: &points_in,
             stress: &stress,
         };
-        let plan = match (&mut self.band, band_zones) {
+        let plan = match (&self.band, band_zones) {
             (Some(b), Some(zones)) => {
                 let s = (self.settings.weight, self.settings.grain_density);
+                // Grains are cut only where the band turns cells discrete or hybrid: a band that
+                // has not grown, or cells the grains have left since, get none (and no
+                // training each epoch).
+                // The zone codes rank them: continuum 0 < hybrid 1 < discrete 2.
+                let grown = zones.iter().zip(&self.zones).any(|(&z, &was)| z as u32 > was as u32);
+                let cut = (points, time, grown);
                 let (plan, shift) = match scene.dimension {
-                    Dimension::Two => band_epoch::enrich::<D2>(&input, &zones, &b.packing, s, self.next_ids.0),
-                    Dimension::Three => band_epoch::enrich::<D3>(&input, &zones, &b.packing, s, self.next_ids.0),
+                    Dimension::Two => enrich_band::<D2>(b, scene, &input, &zones, s, self.next_ids.0, cut),
+                    Dimension::Three => enrich_band::<D3>(b, scene, &input, &zones, s, self.next_ids.0, cut),
                 };
                 if !plan.new_grains.is_empty() {
-                    b.enrichments += 1;
+                    self.band.as_mut().expect("a band state").enrichments += 1;
                     tracing::info!(
                         "shear band at t = {time:.5} s: {} new grains, {} points deleted, the new grains' velocity shifted by {:.2e} m/s to keep the momentum",
                         plan.new_grains.len(),
                         plan.delete_points.len(),
                         shift.iter().map(|c| c * c).sum::<f64>().sqrt()
                     );
+                    tracing::debug!("the shift: {shift:?}");
                 }
                 plan
             }
@@ -329,6 +335,34 @@ impl OracleState {
         self.zones = plan.zones;
         out
     }
+}
+
+/// One shear-band enrichment ([`band_epoch::enrich`]) to the zones `band`, with kinematic
+/// training when the scene has it on ([`band::BandState::train`]; the MPM's `points` and the
+/// epoch's `time`); no grains are cut unless the band has `grown`.
+fn enrich_band<S: grains_grid::Space>(
+    b: &band::BandState,
+    scene: &Scene,
+    input: &epoch::Inputs<'_>,
+    band: &[Zone],
+    shares: (f64, f64),
+    next_grain_id: u64,
+    (points, time, grown): (&[EpochItem], f64, bool),
+) -> (epoch::Plan, [f64; 3]) {
+    let mut train = |need: &std::collections::BTreeSet<usize>| {
+        b.train::<S>(scene, input.cells, need, points, time).unwrap_or_else(|e| {
+            tracing::error!("kinematic training failed, no grains cut this epoch: {e:#}");
+            Vec::new()
+        })
+    };
+    let mut none = |_: &std::collections::BTreeSet<usize>| Vec::new();
+    // None: the packing's grains as they are (no training).
+    let cut: Option<band_epoch::Train<'_>> = match (grown, b.training) {
+        (false, _) => Some(&mut none),
+        (true, true) => Some(&mut train),
+        (true, false) => None,
+    };
+    band_epoch::enrich::<S>(input, band, &b.packing, shares, next_grain_id, cut)
 }
 
 /// Total mass and momentum of the items as the solvers weigh them (their share).
