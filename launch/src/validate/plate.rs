@@ -6,14 +6,16 @@
 //! continuum's curve is a prediction (its friction angle and stiffness come from another test,
 //! not from this one); the check compares it with the DEM's mean over the second half of the
 //! travel. Then §6.3.1's far-field loading: the same on packing 1 with the left wall pushed in
-//! at 5 cm/s, the plate's forces and the strain pictures. Chen's hybrid (the continuum turning
-//! discrete where the bands form) is not built into runs, so its third curve is not here.
+//! at 5 cm/s, the plate's forces and the strain pictures. Last, Chen's hybrid (the continuum
+//! turning discrete where the bands form, `plate_indentation_hybrid_2d.toml`: its own bed and
+//! a segment wall for the plate, as a rigid plate does not meet a hybrid band) against the
+//! same scene as a DEM from the same packing and as the continuum, trained and untrained.
 
 use super::args::ValidateArgs;
 use super::packings;
 use super::pictures;
 use super::runs::{finished, load_with};
-use super::scenes::plate::{B, CENTRE, DEM, DEPTH, HALF_HEIGHT, MPM, TOP, WIDTH};
+use super::scenes::plate::{B, CENTRE, DEM, DEPTH, HALF_HEIGHT, HYBRID, MPM, TOP, WIDTH};
 use crate::metrics::MetricsTable;
 use crate::report::Part;
 use crate::report::chart::{Chart, Kind, Series};
@@ -254,8 +256,171 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
             ("continuum, left wall moving", strain(&mpm_far.dir)?),
         ],
     )?;
+    hybrid(args, &mut part, &mut md)?;
     part.md = md;
     Ok(part)
+}
+
+/// The plate's (depth below `top`, force along y) per macro-step of a run of the hybrid scene:
+/// the segment wall `wall`'s force from the grains (walls.csv) and from the points
+/// (walls_mpm.csv), summed at each time.
+fn wall_bearing(dir: &Path, wall: usize, top: f64) -> anyhow::Result<Vec<(f64, f64)>> {
+    let mut by_time: std::collections::BTreeMap<i64, (f64, f64)> = std::collections::BTreeMap::new();
+    for file in ["walls.csv", "walls_mpm.csv"] {
+        let path = dir.join(file);
+        if !path.is_file() {
+            continue;
+        }
+        let t = MetricsTable::parse(&std::fs::read_to_string(&path)?, &path)?;
+        let (time, y, f) = (
+            t.column("time")?,
+            t.column(&format!("wall{wall}_y"))?,
+            t.column(&format!("wall{wall}_fy"))?,
+        );
+        for k in 0..time.len() {
+            let e = by_time.entry((time[k] * 1e9).round() as i64).or_insert((y[k], 0.0));
+            e.1 += f[k];
+        }
+    }
+    anyhow::ensure!(!by_time.is_empty(), "{}: no walls.csv or walls_mpm.csv", dir.display());
+    Ok(by_time.into_values().map(|(y, f)| (top - y, f)).collect())
+}
+
+/// The hybrid scene's bed top and its plate (the moving segment wall): (top, wall index).
+fn hybrid_plate(scene: &grains_protocol::scene::Scene) -> anyhow::Result<(f64, usize)> {
+    let top = match scene.bodies.first().map(|b| &b.shape) {
+        Some(grains_protocol::scene::Shape::Box { max, .. }) => max[1],
+        _ => anyhow::bail!("{}: body.0 must be the bed, a box", scene.path.display()),
+    };
+    let wall = scene
+        .walls
+        .iter()
+        .position(|w| matches!(w.shape, grains_protocol::scene::WallShape::Segment { .. }) && w.velocity[1] < 0.0)
+        .with_context(|| format!("{}: no segment wall moving down (the plate)", scene.path.display()))?;
+    Ok((top, wall))
+}
+
+/// Chen's hybrid on `plate_indentation_hybrid_2d.toml` against the same scene as a DEM from
+/// its packing (same DEM step and substeps) and as the continuum; trained and untrained.
+fn hybrid(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
+    let path = args.scenes.join(HYBRID);
+    let scene = load_with(&path, &[])?;
+    let (top, wall) = hybrid_plate(&scene)?;
+    let packing = scene
+        .oracle
+        .as_ref()
+        .and_then(|o| o.shear_band.as_ref())
+        .map(|b| b.packing.display().to_string())
+        .with_context(|| format!("{}: not a shear-band scene", path.display()))?;
+    let fixed = "oracle={kind=\"fixed\"}".to_string();
+    let runs: [(&str, Vec<String>); 4] = [
+        ("hybrid, trained", Vec::new()),
+        ("hybrid, untrained", vec!["oracle.training=false".into()]),
+        (
+            "DEM",
+            vec!["body.0.model=\"dem\"".into(), fixed.clone(), format!("body.0.packing={packing:?}")],
+        ),
+        ("continuum", vec!["body.0.model=\"mpm\"".into(), fixed]),
+    ];
+    let mut done = Vec::new();
+    for (label, overrides) in runs {
+        tracing::info!("validate: plate, {label} ({HYBRID})");
+        let run = finished(args, &path, overrides)?;
+        let curve = wall_bearing(&run.dir, wall, top)?;
+        done.push((label, run, curve));
+    }
+    let depth = (DEPTH * 1e3).round() as u32;
+    let _ = writeln!(
+        md,
+        "### The hybrid (Chen 2021 §6.3, Fig. 22–23)\n\n`{HYBRID}`: a continuum bed {top} m deep that turns discrete where \
+         the shear-band oracle finds the bands (Alg. 1), the new grains cut from the same bed poured and trained (§4.1.1); \
+         the plate is a segment wall (a rigid plate does not meet a hybrid band yet). The same scene as a DEM from the \
+         packing (same DEM step and substeps) and as the continuum; the hybrid also untrained (`oracle.training = false`). \
+         Force per metre (grains' and points'), the mean over ±0.5 mm of each depth below the bed's top.\n\n| depth [mm] | \
+         {} |\n|---:|{}",
+        done.iter().map(|(l, _, _)| format!("{l} [N/m]")).collect::<Vec<_>>().join(" | "),
+        "---:|".repeat(done.len())
+    );
+    for mm in 1..=depth {
+        let d = mm as f64 * 1e-3;
+        let cells: Vec<String> = done
+            .iter()
+            .map(|(_, _, c)| format!("{:.1}", mean_over(c, d - 5e-4, d + 5e-4)))
+            .collect();
+        let _ = writeln!(md, "| {mm} | {} |", cells.join(" | "));
+    }
+    let (a, b) = (0.5 * DEPTH, DEPTH);
+    let mean = |k: usize| mean_over(&done[k].2, a, b);
+    let dem_wall = done[2].1.wall;
+    let _ = writeln!(
+        md,
+        "\n| run | wall time | speed against the DEM | grains at the end | mean force {:.0}–{:.0} mm |\n|---|---:|---:|---:|---:|",
+        1e3 * a,
+        1e3 * b
+    );
+    for (k, (label, run, _)) in done.iter().enumerate() {
+        let t = MetricsTable::read(&run.dir)?;
+        let _ = writeln!(
+            md,
+            "| {label} | {:.1} s | {:.2}× | {:.0} | {:.1} N/m |",
+            run.wall,
+            dem_wall / run.wall,
+            t.last("dem_items").unwrap_or(0.0),
+            mean(k)
+        );
+    }
+    let _ = writeln!(md);
+    let mut chart = Chart {
+        title: "Plate indentation: the hybrid against the DEM of the same bed and the continuum".into(),
+        x_label: "depth [mm]".into(),
+        y_label: "force [N/m]".into(),
+        ..Chart::default()
+    };
+    for (label, _, c) in &done {
+        chart.series.push(Series::new(
+            label.to_string(),
+            Kind::Line,
+            c.iter().filter(|(d, _)| *d >= -GAP).map(|&(d, f)| (1e3 * d, f)).collect(),
+        ));
+    }
+    part.chart(
+        &args.out,
+        "plate_force_hybrid",
+        "The plate's force against its depth: the hybrid (trained and untrained), the DEM of the same bed, the continuum",
+        &chart,
+    )?;
+    part.check(
+        "plate indentation: the hybrid's force within 30% of the DEM's on the same bed",
+        "Chen 2021 Fig. 23: hybrid and DEM agree",
+        format!(
+            "mean over {:.0}–{:.0} mm: hybrid {:.1} N/m, DEM {:.1} N/m ({:+.1}%); untrained {:.1}, continuum {:.1}",
+            1e3 * a,
+            1e3 * b,
+            mean(0),
+            mean(2),
+            100.0 * (mean(0) / mean(2) - 1.0),
+            mean(1),
+            mean(3)
+        ),
+        format!("within {:.0}%", 100.0 * TOLERANCE),
+        (mean(0) / mean(2) - 1.0).abs() <= TOLERANCE,
+    );
+    // Every epoch of the hybrid keeps the mass (the enrichment's rules, protocol §3.10).
+    let t = MetricsTable::read(&done[0].1.dir)?;
+    let (before, dem, mpm) = (t.column("oracle_mass")?, t.column("dem_mass")?, t.column("mpm_mass")?);
+    let worst = (0..before.len())
+        .filter(|&i| before[i] > 0.0)
+        .map(|i| ((dem[i] + mpm[i]) / before[i] - 1.0).abs())
+        .fold(0.0, f64::max);
+    let enriched = t.last("dem_items").unwrap_or(0.0) > 0.0;
+    part.check(
+        "plate indentation: the hybrid enriches a band and every epoch keeps the mass",
+        "Chen 2021 §4: grains replace the continuum in the band, the mass conserved",
+        format!("grains at the end: {enriched}; the worst epoch's mass change {worst:.1e}"),
+        "grains at the end, mass to 1e-9",
+        enriched && worst < 1e-9,
+    );
+    Ok(())
 }
 
 #[cfg(test)]

@@ -34,6 +34,9 @@ pub mod silo {
 pub mod plate {
     pub const DEM: &str = "plate_indentation_2d.toml";
     pub const MPM: &str = "plate_indentation_mpm_2d.toml";
+    /// Chen's hybrid (`oracle.kind = "shear_band"`) on its own bed, with a segment wall for
+    /// the plate; run also as a DEM from its packing and as a continuum.
+    pub const HYBRID: &str = "plate_indentation_hybrid_2d.toml";
     /// The bed's width and its top [m] (the continuum scene's body.0.max).
     pub const WIDTH: f64 = 0.16;
     pub const TOP: f64 = 0.04;
