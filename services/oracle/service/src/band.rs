@@ -9,7 +9,7 @@
 //! at time 0, so the grains cut into the band are taken from where the material now in those
 //! cells started (the points' positions at the first epoch, by id), and driven through the
 //! continuum's motion since: a ring one cell wide around them moves with the continuum's
-//! velocity (recorded per cell at every epoch), the grains inside move as grains do, the
+//! velocity (the points' and the grains', per cell at every epoch), the grains inside move as grains do, the
 //! scene's walls move as scripted ([`grains_dem::training::train`]). The trained grains that
 //! end in the cells that need them are the new grains, at the continuum's velocity
 //! ([`grains_oracle::band_epoch::enrich`] says why). Their contacts' tangential springs are
@@ -121,11 +121,12 @@ impl BandState {
 
     /// Alg. 1 at `time` over the points (the MPM's epoch items): the band's zones (§4) when
     /// the flagged set has held for τ_g, else None. The points' recent plastic strain counts
-    /// from the record a window τ_l ago.
-    pub fn detect(&mut self, cells: &Grid, dim: usize, time: f64, points: &[EpochItem]) -> Option<Vec<Zone>> {
+    /// from the record a window τ_l ago. With training on, it also records the material's
+    /// velocity per cell, from the points and the `grains` (the DEM's epoch items).
+    pub fn detect(&mut self, cells: &Grid, dim: usize, time: f64, points: &[EpochItem], grains: &[EpochItem]) -> Option<Vec<Zone>> {
         let points: Vec<&EpochItem> = points.iter().filter(|p| p.flags & EPOCH_FIXED == 0).collect();
         if self.training {
-            self.record(cells, dim, time, &points);
+            self.record(cells, dim, time, &points, grains);
         }
         let max_rate = points.iter().map(|p| p.plastic_rate).fold(0.0, f64::max);
         let c = &self.coefficients;
@@ -160,18 +161,23 @@ impl BandState {
         (self.recent, self.persistence, self.enrichments, self.origin, self.history) = saved;
     }
 
-    /// The points' positions at the first call, and the continuum's velocity per cell now.
-    fn record(&mut self, cells: &Grid, dim: usize, time: f64, points: &[&EpochItem]) {
+    /// The points' positions at the first call, and the material's velocity per cell now: the
+    /// mass-weighted mean of the points' and the grains' (frozen grains left out), each
+    /// counted with its share. Once a band is discrete its cells have grains only: a later
+    /// enrichment's ring there must move with them, not with a continuum that left.
+    fn record(&mut self, cells: &Grid, dim: usize, time: f64, points: &[&EpochItem], grains: &[EpochItem]) {
         if self.origin.is_empty() {
             self.origin = points.iter().map(|p| (p.id, p.position)).collect();
             self.origin.sort_unstable_by_key(|o| o.0);
         }
         let count = cells.nodes.iter().take(dim).product::<u64>() as usize;
         let (mut momentum, mut mass) = (vec![[0.0; 3]; count], vec![0.0; count]);
-        for p in points {
+        let grains = grains.iter().filter(|g| g.flags & EPOCH_FIXED == 0);
+        for p in points.iter().copied().chain(grains) {
             if let Some(c) = cell_of(cells, dim, p.position) {
-                (0..3).for_each(|k| momentum[c][k] += p.mass * p.velocity[k]);
-                mass[c] += p.mass;
+                let m = p.share * p.mass;
+                (0..3).for_each(|k| momentum[c][k] += m * p.velocity[k]);
+                mass[c] += m;
             }
         }
         let velocity = momentum
@@ -411,7 +417,10 @@ mod tests {
         let end = 0.05;
         let epochs = (end / every).round() as usize;
         for k in 1..=epochs {
-            assert!(band.detect(&cells, 2, k as f64 * every, &points_at(k as f64 * every)).is_none());
+            assert!(
+                band.detect(&cells, 2, k as f64 * every, &points_at(k as f64 * every), &[])
+                    .is_none()
+            );
         }
         // The cells whose centres lie in [12, 28] × [4, 12] mm.
         let need: BTreeSet<usize> = (0..(cells.nodes[0] * cells.nodes[1]) as usize)

@@ -266,7 +266,7 @@ impl OracleState {
         let (nodes, kernel) = grains_service::grid::scene_grid(scene);
         let cells = self.cells;
         let band_zones = match &mut self.band {
-            Some(b) => match b.detect(&cells, scene.dim(), time, points) {
+            Some(b) => match b.detect(&cells, scene.dim(), time, points, grains) {
                 Some(zones) => Some(zones),
                 // No band (yet) and all continuum: nothing to convert.
                 None if self.zones.iter().all(|&z| z == Zone::Continuum) => {
