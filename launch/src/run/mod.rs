@@ -225,7 +225,7 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
                 "{}: the prediction counts the starting zones only: the {} oracle (every {} steps{}) moves them as the \
                  material flows, and where it turns the flow discrete the hybrid costs up to the pure DEM's, plus its MPM",
                 path.display(),
-                format!("{:?}", o.kind).to_lowercase(),
+                o.kind.name(),
                 o.every,
                 if o.max_inertial > 0.0 {
                     format!(", discrete above I = {:e}", o.max_inertial)

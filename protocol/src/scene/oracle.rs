@@ -23,6 +23,16 @@ pub enum OracleKind {
 }
 
 impl OracleKind {
+    /// The kind as a scene writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            OracleKind::Fixed => "fixed",
+            OracleKind::Layered => "layered",
+            OracleKind::Surface => "surface",
+            OracleKind::ShearBand => "shear_band",
+        }
+    }
+
     /// Whether the oracle moves the zones every `every` steps.
     pub fn adaptive(self) -> bool {
         matches!(self, OracleKind::Layered | OracleKind::Surface | OracleKind::ShearBand)

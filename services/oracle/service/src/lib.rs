@@ -44,11 +44,7 @@ pub fn check_scene(scene: &Scene) -> Result<(), grains_protocol::scene::SceneErr
     match scene.oracle.as_ref().map(|o| o.kind) {
         None | Some(OracleKind::Fixed) => Ok(()),
         Some(kind @ (OracleKind::Surface | OracleKind::Layered | OracleKind::ShearBand)) => {
-            let name = match kind {
-                OracleKind::Surface => "surface",
-                OracleKind::Layered => "layered",
-                _ => "shear_band",
-            };
+            let name = kind.name();
             if settings(scene).is_none() {
                 return Err(err(
                     "oracle.kind",
