@@ -53,7 +53,7 @@ fn refs(a: &[String]) -> Vec<&str> {
 
 /// A DEM, an MPM, a fixed-zone hybrid (with the flip transfer's carried node accelerations),
 /// an adaptive hybrid (surface oracle every 100 steps: grains and points created and
-/// deleted; its zones, ids and generator carried) and a DEM with rigid bodies, each killed after a checkpoint and rows
+/// deleted; its zones, ids and generator carried), a shear-band hybrid and a DEM with rigid bodies, each killed after a checkpoint and rows
 /// beyond it, then resumed. The launcher is killed (SIGKILL: no summary, `metrics.csv.part`
 /// left as it was), except in the fixed-zone hybrid, where the MPM is (the launcher fails the
 /// run and finishes its outputs).
@@ -67,6 +67,10 @@ fn a_run_killed_mid_way_resumes_to_the_uninterrupted_runs_physics_and_frames() {
         ("tests/scenes/mpm_small_2d.toml", "run.steps=3000", 500, None),
         ("tests/scenes/hybrid_pile_2d.toml", "run.duration=0.06", 200, Some("grains-mpm")),
         ("tests/scenes/hybrid_adaptive_2d.toml", "run.duration=0.05", 250, None),
+        // The shear-band oracle: checkpointed before the band (its strain records,
+        // persistence and velocity history carried), the band found and trained after the
+        // resume as in the run that never stopped.
+        ("tests/scenes/hybrid_band_2d.toml", "run.duration=0.06", 1500, None),
         // Rigid bodies: their state and contact histories are in the DEM's checkpoint.
         ("tests/scenes/rigid_floor_2d.toml", "run.duration=0.15", 500, None),
         // Rigid bodies and a continuum: the points' contact histories are the DEM's, their
