@@ -194,17 +194,7 @@ fn packing(ctx: &Ctx, raw: Option<&Spanned<String>>, model: Model, f: &dyn Fn(&s
             Some(&f("packing")),
             "a packing file makes grains: only a model = \"dem\" or \"hybrid\" body can have one".into(),
         )),
-        Some(p) => {
-            let path = ctx.file(p.get_ref());
-            if !path.is_file() {
-                return Err(ctx.err(
-                    Some(p.span()),
-                    Some(&f("packing")),
-                    format!("no packing file at {} (paths are relative to the scene file)", path.display()),
-                ));
-            }
-            Ok(Some(path))
-        }
+        Some(p) => Ok(Some(ctx.existing_file(p, &f("packing"), "packing file", "")?)),
     }
 }
 

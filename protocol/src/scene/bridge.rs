@@ -16,20 +16,7 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawBridge>) -> Result<Option<Scen
     let Some(b) = raw.filter(|b| b.enabled) else { return Ok(None) };
     let settings = match &b.settings {
         None => None,
-        Some(p) => {
-            let path = ctx.file(p.get_ref());
-            if !path.is_file() {
-                return Err(ctx.err(
-                    Some(p.span()),
-                    Some("bridge.settings"),
-                    format!(
-                        "no bridge settings file at {} (paths are relative to the scene file)",
-                        path.display()
-                    ),
-                ));
-            }
-            Some(path)
-        }
+        Some(p) => Some(ctx.existing_file(p, "bridge.settings", "bridge settings file", "")?),
     };
     Ok(Some(SceneBridge { settings }))
 }

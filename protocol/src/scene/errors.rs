@@ -97,6 +97,20 @@ impl Ctx<'_> {
     pub fn file(&self, written: &str) -> PathBuf {
         resolve(self.path, written)
     }
+
+    /// The file the path field `field` names ([`Ctx::file`]), which must exist: else an error
+    /// "no `what` at <path>" (with `hint` after the rule for relative paths).
+    pub fn existing_file(&self, p: &toml::Spanned<String>, field: &str, what: &str, hint: &str) -> Result<PathBuf, SceneError> {
+        let path = self.file(p.get_ref());
+        if path.is_file() {
+            return Ok(path);
+        }
+        Err(self.err(
+            Some(p.span()),
+            Some(field),
+            format!("no {what} at {} (paths are relative to the scene file{hint})", path.display()),
+        ))
+    }
 }
 
 /// The file a path field of the scene at `scene_path` names: relative to the scene file's

@@ -167,20 +167,7 @@ fn shear_band(ctx: &Ctx, o: &RawOracle) -> Result<Option<ShearBand>, SceneError>
         }
     };
     let packing = match &o.packing {
-        Some(p) => {
-            let path = ctx.file(p.get_ref());
-            if !path.is_file() {
-                return Err(ctx.err(
-                    Some(p.span()),
-                    Some("oracle.packing"),
-                    format!(
-                        "no packing file at {} (paths are relative to the scene file; `grains pack` writes one)",
-                        path.display()
-                    ),
-                ));
-            }
-            path
-        }
+        Some(p) => ctx.existing_file(p, "oracle.packing", "packing file", "; `grains pack` writes one")?,
         None => {
             return Err(ctx.err(
                 Some(o.kind.span()),

@@ -295,10 +295,9 @@ impl OracleState {
         let plan = match (&self.band, band_zones) {
             (Some(b), Some(zones)) => {
                 let s = (self.settings.weight, self.settings.grain_density);
-                // Grains are cut only where the band turns cells discrete or hybrid: a band that
-                // has not grown, or cells the grains have left since, get none (and no
-                // training each epoch).
-                // The zone codes rank them: continuum 0 < hybrid 1 < discrete 2.
+                // Grains are cut only where the band turns cells discrete or hybrid (the zone
+                // codes rank them: continuum 0 < hybrid 1 < discrete 2): a band that has not
+                // grown, or cells the grains have left since, get none (and no training).
                 let grown = zones.iter().zip(&self.zones).any(|(&z, &was)| z as u32 > was as u32);
                 let cut = (points, time, grown);
                 let (plan, shift) = match scene.dimension {
@@ -313,7 +312,6 @@ impl OracleState {
                         plan.delete_points.len(),
                         shift.iter().map(|c| c * c).sum::<f64>().sqrt()
                     );
-                    tracing::debug!("the shift: {shift:?}");
                 }
                 plan
             }
