@@ -210,8 +210,8 @@ wire_type! {
 }
 
 wire_type! {
-    /// A grain (DEM → oracle) or a material point (MPM → oracle) at an oracle epoch. 104 bytes.
-    "grains.EpochItem.v2",
+    /// A grain (DEM → oracle) or a material point (MPM → oracle) at an oracle epoch. 112 bytes.
+    "grains.EpochItem.v3",
     pub struct EpochItem {
         pub id: u64,
         /// Grain radius [m]; 0 for a material point.
@@ -231,6 +231,10 @@ wire_type! {
         /// without plasticity.
         pub plastic_strain: f64,
         pub plastic_rate: f64,
+        /// A point's pressure [Pa], compression positive (the mean of the principal Cauchy
+        /// stresses, negated); 0 for a grain. Kinematic training brings the grains it makes
+        /// to the pressure of the points they replace.
+        pub pressure: f64,
     }
 }
 

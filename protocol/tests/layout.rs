@@ -28,8 +28,8 @@ fn wire_layouts_match_the_spec() {
     check_layout!(SpawnGrain, size 64, id @ 0, radius @ 8, position @ 16, velocity @ 40);
     check_layout!(SpawnPoint, size 120, id @ 0, volume @ 8, mass @ 16, position @ 24,
         velocity @ 48, stress @ 72);
-    check_layout!(EpochItem, size 104, id @ 0, radius @ 8, mass @ 16, share @ 24, flags @ 32,
-        position @ 40, velocity @ 64, plastic_strain @ 88, plastic_rate @ 96);
+    check_layout!(EpochItem, size 112, id @ 0, radius @ 8, mass @ 16, share @ 24, flags @ 32,
+        position @ 40, velocity @ 64, plastic_strain @ 88, plastic_rate @ 96, pressure @ 104);
     check_layout!(NodeStress, size 56, node @ 0, stress @ 8);
     check_layout!(PointScale, size 16, id @ 0, factor @ 8);
     check_layout!(Summary, size 104, role @ 0, status @ 4, step @ 8, time @ 16, n_items @ 24,

@@ -426,6 +426,7 @@ impl<S: MpmSpace> Solver for MpmSolver<S> {
             velocity: S::to_array(p.v[k]),
             plastic_strain: p.plastic_strain[k],
             plastic_rate: p.plastic_rate[k],
+            pressure: Model::pressure(&p.tau[k], p.jacobian[k]),
         }));
     }
 

@@ -344,10 +344,11 @@ fn enrich_band<S: grains_grid::Space>(
     (points, time, grown): (&[EpochItem], f64, bool),
 ) -> (epoch::Plan, [f64; 3]) {
     let mut train = |need: &std::collections::BTreeSet<usize>| {
-        b.train::<S>(scene, input.cells, need, points, time).unwrap_or_else(|e| {
-            tracing::error!("kinematic training failed, no grains cut this epoch: {e:#}");
-            Vec::new()
-        })
+        b.train::<S>(scene, input.cells, need, points, input.grains, time)
+            .unwrap_or_else(|e| {
+                tracing::error!("kinematic training failed, no grains cut this epoch: {e:#}");
+                Vec::new()
+            })
     };
     let mut none = |_: &std::collections::BTreeSet<usize>| Vec::new();
     // None: the packing's grains as they are (no training).
