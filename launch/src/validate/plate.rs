@@ -300,6 +300,19 @@ fn hybrid_plate(scene: &grains_protocol::scene::Scene) -> anyhow::Result<(f64, u
     Ok((top, wall))
 }
 
+/// Chen 2021's continuum for these grains (the chute's glass beads, the same material): the
+/// critical-state softening fitted by `grains bench chute --radii 0.5 --cells 0.004 --depths
+/// 0.15 --continuum critical-state --cell-grains 9600` to the first shear of a 9,600-grain
+/// simple-shear cell (docs/validate/chute/chute_critical_state_9600.md), started at the scene's
+/// packing fraction. Fitted to another test, not to this one.
+const CRITICAL_STATE: [&str; 5] = [
+    "material.0.mpm.model=\"critical_state\"",
+    "material.0.mpm.friction_angle=14.96",
+    "material.0.mpm.packing_critical=0.8156",
+    "material.0.mpm.chi=8.80",
+    "material.0.mpm.xi=4.47",
+];
+
 /// Chen's hybrid on `plate_indentation_hybrid_2d.toml` against the same scene as a DEM from
 /// its packing (same DEM step and substeps) and as the continuum; trained and untrained.
 fn hybrid(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<()> {
@@ -313,14 +326,20 @@ fn hybrid(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Resu
         .map(|b| b.packing.display().to_string())
         .with_context(|| format!("{}: not a shear-band scene", path.display()))?;
     let fixed = "oracle={kind=\"fixed\"}".to_string();
-    let runs: [(&str, Vec<String>); 4] = [
+    let critical: Vec<String> = CRITICAL_STATE.iter().map(|s| s.to_string()).collect();
+    let runs: [(&str, Vec<String>); 6] = [
         ("hybrid, trained", Vec::new()),
         ("hybrid, untrained", vec!["oracle.training=false".into()]),
         (
             "DEM",
             vec!["body.0.model=\"dem\"".into(), fixed.clone(), format!("body.0.packing={packing:?}")],
         ),
-        ("continuum", vec!["body.0.model=\"mpm\"".into(), fixed]),
+        ("continuum", vec!["body.0.model=\"mpm\"".into(), fixed.clone()]),
+        ("hybrid, trained, critical state", critical.clone()),
+        (
+            "continuum, critical state",
+            [critical, vec!["body.0.model=\"mpm\"".into(), fixed]].concat(),
+        ),
     ];
     let mut done = Vec::new();
     for (label, overrides) in runs {
@@ -336,8 +355,10 @@ fn hybrid(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Resu
          the shear-band oracle finds the bands (Alg. 1), the new grains cut from the same bed poured and trained (§4.1.1); \
          the plate is a segment wall (a rigid plate does not meet a hybrid band yet). The same scene as a DEM from the \
          packing (same DEM step and substeps) and as the continuum; the hybrid also untrained (`oracle.training = false`). \
-         Force per metre (grains' and points'), the mean over ±0.5 mm of each depth below the bed's top.\n\n| depth [mm] | \
+         Last, the hybrid and the continuum with Chen's own continuum, the critical-state softening, fitted to the first \
+         shear of a 9,600-grain simple-shear cell of the same grains (not to this test: `{}`). Force per metre (grains' and points'), the mean over ±0.5 mm of each depth below the bed's top.\n\n| depth [mm] | \
          {} |\n|---:|{}",
+        CRITICAL_STATE.join(" "),
         done.iter().map(|(l, _, _)| format!("{l} [N/m]")).collect::<Vec<_>>().join(" | "),
         "---:|".repeat(done.len())
     );
@@ -386,7 +407,7 @@ fn hybrid(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Resu
     part.chart(
         &args.out,
         "plate_force_hybrid",
-        "The plate's force against its depth: the hybrid (trained and untrained), the DEM of the same bed, the continuum",
+        "The plate's force against its depth: the hybrid (trained and untrained), the DEM of the same bed, the continuum; the hybrid and the continuum with Chen's critical-state continuum",
         &chart,
     )?;
     part.check(
@@ -404,6 +425,24 @@ fn hybrid(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Resu
         ),
         format!("within {:.0}%", 100.0 * TOLERANCE),
         (mean(0) / mean(2) - 1.0).abs() <= TOLERANCE,
+    );
+    // Chen's Fig. 23–24: the hybrid follows the DEM more closely than its continuum does.
+    let off = |k: usize| mean(k) / mean(2) - 1.0;
+    part.check(
+        "plate indentation, Chen's continuum: the trained hybrid is closer to the DEM than the continuum alone",
+        "Chen 2021 Fig. 23–24: the hybrid agrees with the DEM where the continuum does not",
+        format!(
+            "mean over {:.0}–{:.0} mm: hybrid {:.1} N/m ({:+.1}%), continuum {:.1} N/m ({:+.1}%), DEM {:.1}",
+            1e3 * a,
+            1e3 * b,
+            mean(4),
+            100.0 * off(4),
+            mean(5),
+            100.0 * off(5),
+            mean(2)
+        ),
+        "the hybrid's error under the continuum's",
+        off(4).abs() < off(5).abs(),
     );
     // Every epoch of the hybrid keeps the mass (the enrichment's rules, protocol §3.10).
     let t = MetricsTable::read(&done[0].1.dir)?;
