@@ -1,10 +1,11 @@
 //! Kinematic training's release (`grains_dem::training::release`) against linear elasticity.
 
+mod common;
+
 use glam::DVec2;
-use grains_dem::contact::{ContactParams, Damping};
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::D2;
-use grains_dem::state::{DemParams, DemState, Domain, Grains};
+use grains_dem::state::{DemState, Grains};
 use grains_dem::training::{pressure, release};
 
 const RADIUS: f64 = 1e-3;
@@ -14,31 +15,7 @@ const KN: f64 = 1e4;
 /// A triangular lattice of touching disks, 16 × 16, its outer rows (centres within 1.5
 /// diameters of the lattice's edge) the shell. Returns the state and the shell's ids.
 fn lattice() -> (DemState<D2>, Vec<u64>) {
-    let law = ContactParams {
-        stiffness_normal: KN,
-        stiffness_tangential: 0.5 * KN,
-        damping: Damping::Restitution(0.3),
-        friction: 0.5,
-        cohesion_normal: 0.0,
-        cohesion_tangential: 0.0,
-        damping_scale: 1.0,
-    };
-    let mut state = DemState {
-        grains: Grains::default(),
-        walls: Vec::new(),
-        bodies: Vec::new(),
-        params: DemParams {
-            materials: vec![law],
-            gravity: DVec2::ZERO,
-            domain: Domain {
-                min: [-1.0; 3],
-                max: [1.0; 3],
-                periodic: [false; 3],
-            },
-            skin: 0.1 * RADIUS,
-        },
-        time: 0.0,
-    };
+    let mut state = common::state(common::law(KN, 0.3, 0.5), DVec2::ZERO, Vec::new(), Vec::new());
     let (d, n) = (2.0 * RADIUS, 16);
     let row = d * 3f64.sqrt() / 2.0;
     let (width, height) = (n as f64 * d, (n - 1) as f64 * row);
