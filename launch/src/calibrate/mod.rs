@@ -60,6 +60,12 @@ pub struct CalibrateArgs {
     /// Seed of the sample's radii and lattice jitter.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Which strength of the biaxial test `--write` records as the friction angle: the
+    /// critical state (flows that shear far past the peak: collapses, silos) or the peak
+    /// (dense material sheared less than the peak's strain over the run: a flow starting from
+    /// rest, a pile).
+    #[arg(long, value_enum, default_value_t = Strength::Critical)]
+    pub strength: Strength,
     /// Write the result into the scene file's `[material.mpm]` (the biaxial test's).
     #[arg(long)]
     pub write: bool,
@@ -74,6 +80,15 @@ pub struct CalibrateArgs {
     /// Shear strain held at each inertial number (the first quarter is the transient).
     #[arg(long, default_value_t = 2.0)]
     pub strain: f64,
+}
+
+/// The biaxial test's strength a scene's continuum takes as its friction angle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Strength {
+    /// The mean over the critical-state window (axial strain 15–30 %).
+    Critical,
+    /// The largest mobilized friction.
+    Peak,
 }
 
 /// One record of the test.
@@ -115,6 +130,14 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// The friction angle [deg] of `strength`.
+    pub fn friction(&self, strength: Strength) -> f64 {
+        match strength {
+            Strength::Critical => self.critical,
+            Strength::Peak => self.peak,
+        }
+    }
+
     fn young_of(&self, plane: f64, poisson: f64) -> f64 {
         (1.0 - poisson * poisson) * plane
     }
@@ -382,10 +405,14 @@ fn wall_at<S: Space>(w: &Wall<S>, axis: usize) -> f64 {
 /// What `--write` puts in the scene: the command that reproduces the numbers (its options, as
 /// [`CalibrateOptions::parse`] reads them back) and what they are.
 pub fn provenance(c: &Calibration, o: &CalibrateOptions) -> String {
+    let friction = match o.strength {
+        Strength::Critical => format!("critical state (mean over axial strain 15-30 %, peak {:.1} deg)", c.peak),
+        Strength::Peak => format!("peak (critical state {:.1} deg over axial strain 15-30 %)", c.critical),
+    };
     format!(
-        "grains calibrate {}: DEM biaxial test of this material ({} grains); friction_angle = critical state (mean over axial \
-         strain 15-30 %, peak {:.1} deg), young = initial slope of the loading (first 0.1 % of axial strain, plane strain)",
-        o, c.grains, c.peak
+        "grains calibrate {}: DEM biaxial test of this material ({} grains); friction_angle = {friction}, young = initial \
+         slope of the loading (first 0.1 % of axial strain, plane strain)",
+        o, c.grains
     )
 }
 
@@ -396,6 +423,7 @@ pub struct CalibrateOptions {
     pub seed: u64,
     pub pressure: f64,
     pub inertial: f64,
+    pub strength: Strength,
 }
 
 impl std::fmt::Display for CalibrateOptions {
@@ -404,7 +432,12 @@ impl std::fmt::Display for CalibrateOptions {
             f,
             "--grains {} --seed {} --pressure {} --inertial {:e}",
             self.grains, self.seed, self.pressure, self.inertial
-        )
+        )?;
+        // The default is left out, so that the lines written before the option still read.
+        match self.strength {
+            Strength::Critical => Ok(()),
+            Strength::Peak => write!(f, " --strength peak"),
+        }
     }
 }
 
@@ -420,6 +453,12 @@ impl CalibrateOptions {
             seed: value("--seed")?.parse().ok()?,
             pressure: value("--pressure")?.parse().ok()?,
             inertial: value("--inertial")?.parse().ok()?,
+            strength: match value("--strength") {
+                None => Strength::Critical,
+                Some(&"peak") => Strength::Peak,
+                Some(&"critical") => Strength::Critical,
+                Some(_) => return None,
+            },
         })
     }
 }
@@ -438,6 +477,7 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
         seed: args.seed,
         pressure: args.pressure.unwrap_or_else(|| default_pressure(&scene, material)),
         inertial: args.inertial,
+        strength: args.strength,
     };
     let mpm = scene.materials[material].mpm.as_ref().expect("checked");
     if args.shear {
@@ -475,7 +515,7 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
     if args.write {
         let text = std::fs::read_to_string(&args.scene)?;
         let name = &scene.materials[material].name;
-        let edited = write_calibration(&text, name, c.critical, young, &provenance(&c, &options))
+        let edited = write_calibration(&text, name, c.friction(options.strength), young, &provenance(&c, &options))
             .with_context(|| format!("{}: writing the calibration", args.scene.display()))?;
         crate::run::outputs::write_atomic(&args.scene, edited.as_bytes())?;
         tracing::info!(
@@ -639,11 +679,12 @@ mod tests {
 
     #[test]
     fn provenance_gives_back_its_options() {
-        let o = CalibrateOptions {
+        let mut o = CalibrateOptions {
             grains: 2400,
             seed: 3,
             pressure: 812.5,
             inertial: 1e-3,
+            strength: Strength::Critical,
         };
         let c = Calibration {
             records: Vec::new(),
@@ -663,7 +704,15 @@ mod tests {
             "{p}"
         );
         assert_eq!(CalibrateOptions::parse(&p), Some(o));
+        assert!(p.contains("friction_angle = critical state"), "{p}");
         assert_eq!(CalibrateOptions::parse("hand-set"), None);
+        // The peak is named in the options and in what the line says the angle is.
+        o.strength = Strength::Peak;
+        let p = provenance(&c, &o);
+        assert!(p.starts_with("grains calibrate --grains 2400 --seed 3 --pressure 812.5 --inertial 1e-3 --strength peak: "));
+        assert!(p.contains("friction_angle = peak (critical state 14.0 deg"), "{p}");
+        assert_eq!(CalibrateOptions::parse(&p), Some(o));
+        assert_eq!((c.friction(Strength::Peak), c.friction(Strength::Critical)), (17.0, 14.0));
     }
 
     #[test]
