@@ -53,6 +53,11 @@ pub struct ChuteArgs {
     /// Grains of the shear cell of `--continuum critical-state` (more: less noise in its Φ).
     #[arg(long, default_value_t = 2400)]
     pub cell_grains: usize,
+    /// Beds poured per grain size (`run.seed` 1 to N) for the pure DEM: its flux over this
+    /// window scatters from one pour to the next (6.5% between four 15-cm beds), so the
+    /// hybrid (run on the first) is compared with their mean.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub pours: u64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -78,9 +83,12 @@ fn grains(r: f64) -> Vec<String> {
     ]
 }
 
-/// The poured packing of grains of radius `r`, once per size (kept in `--out`).
-fn packing(args: &ChuteArgs, r: f64) -> anyhow::Result<PathBuf> {
-    let path = std::path::absolute(args.out.join(format!("packing_r{:.0}um_d{:.0}mm.data", r * 1e6, args.depth * 1e3)))?;
+/// The packing of grains of radius `r` poured with `run.seed` = `seed`, once per size and
+/// seed (kept in `--out`).
+fn packing(args: &ChuteArgs, r: f64, seed: u64) -> anyhow::Result<PathBuf> {
+    let pour = if seed == 1 { String::new() } else { format!("_s{seed}") };
+    let name = format!("packing_r{:.0}um_d{:.0}mm{pour}.data", r * 1e6, args.depth * 1e3);
+    let path = std::path::absolute(args.out.join(name))?;
     if path.exists() {
         return Ok(path);
     }
@@ -94,11 +102,15 @@ fn packing(args: &ChuteArgs, r: f64) -> anyhow::Result<PathBuf> {
         format!("domain.max=[{LENGTH},{:e}]", top + 0.01),
         "coupling.substeps=10".into(),
         "run.threads=2".into(),
+        format!("run.seed={seed}"),
     ]);
     let dt = dem_step(&args.scenes.join(SCENE), &o)?;
     o.push(format!("run.dt={:e}", 10.0 * dt));
     o.push(format!("run.duration={:.3}", (2.0 * top / 9.81).sqrt() + 0.1));
-    tracing::info!("bench chute: pouring grains of radius {} mm (grains pack, once)", r * 1e3);
+    tracing::info!(
+        "bench chute: pouring grains of radius {} mm, seed {seed} (grains pack, once)",
+        r * 1e3
+    );
     crate::pack::pack(&crate::pack::PackArgs {
         scene: args.scenes.join(SCENE),
         out: path.clone(),
@@ -179,6 +191,8 @@ struct Row {
     /// Down-slope mass flux per unit width at the end of the window, Σ m v_x / L [kg/(m s)]
     /// (per metre of thickness).
     flux: f64,
+    /// The pure DEM's: its flux on every pour, the first (`flux`) included; empty for a hybrid.
+    pours: Vec<f64>,
 }
 
 impl Row {
@@ -222,40 +236,51 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
     let mut rows: Vec<Row> = Vec::new();
     for &radius_mm in &args.radii {
         let r = radius_mm * 1e-3;
-        let packing = packing(args, r)?;
+        let first = packing(args, r, 1)?;
         let mut base = grains(r);
         base.extend([
-            format!("body.0.packing={:?}", packing.display().to_string()),
             format!("body.0.max=[{LENGTH},{:e}]", 3.0 * r + args.depth),
             format!("domain.max=[{LENGTH},{:e}]", args.depth + 0.03),
             format!("run.duration={}", args.window),
         ]);
         let dt = dem_step(&args.scenes.join(SCENE), &base)?;
+        let on = |packing: &Path| [format!("body.0.packing={:?}", packing.display().to_string())];
         let continuum = match args.continuum {
             Continuum::Scene => Vec::new(),
-            Continuum::CriticalState => critical_state_overrides(args, &base, &packing)?,
+            Continuum::CriticalState => critical_state_overrides(args, &[base.clone(), on(&first).into()].concat(), &first)?,
         };
-        let mut o = base.clone();
-        // The same DEM step, 20 to a macro-step: the launcher's per-macro-step cost (summaries,
-        // metrics) stays out of the DEM's figure.
-        o.extend([
-            "body.0.model=\"dem\"".into(),
-            format!("coupling.substeps={DEM_SUBSTEPS}"),
-            format!("run.dt={:e}", DEM_SUBSTEPS as f64 * dt),
-            "run.threads=2".into(),
-        ]);
-        let (sample, grains, _, flux) = one(args, &format!("DEM r={radius_mm}mm"), &o)?;
-        let dem_grains = grains;
+        // The pure DEM on every pour. The same DEM step, 20 to a macro-step: the launcher's
+        // per-macro-step cost (summaries, metrics) stays out of the DEM's figure.
+        let mut dem = None;
+        let mut pours = Vec::new();
+        for seed in 1..=args.pours {
+            let mut o = [base.clone(), on(&packing(args, r, seed)?).into()].concat();
+            o.extend([
+                "body.0.model=\"dem\"".into(),
+                format!("coupling.substeps={DEM_SUBSTEPS}"),
+                format!("run.dt={:e}", DEM_SUBSTEPS as f64 * dt),
+                "run.threads=2".into(),
+                // The seed the bed was poured with: the glued floor row is drawn from it.
+                format!("run.seed={seed}"),
+            ]);
+            let pour = if seed == 1 { String::new() } else { format!(" seed={seed}") };
+            let (sample, grains, _, flux) = one(args, &format!("DEM r={radius_mm}mm{pour}"), &o)?;
+            pours.push(flux);
+            dem.get_or_insert((sample, grains, flux));
+        }
+        let (sample, dem_grains, flux) = dem.expect("at least one pour");
         rows.push(Row {
             radius: r,
             cell: 0.0,
             depth: 1.0,
-            grains,
+            grains: dem_grains,
             dem_grains,
             points: 0,
             sample,
             flux,
+            pours,
         });
+        base.extend(on(&first));
         for &h in &args.cells {
             for &f in &args.depths {
                 let mut o = base.clone();
@@ -279,6 +304,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                     points,
                     sample,
                     flux,
+                    pours: Vec::new(),
                 });
             }
         }
@@ -347,10 +373,23 @@ fn dem_wall(rows: &[Row], radius: f64) -> f64 {
         .map_or(f64::NAN, |r| r.sample.wall)
 }
 
+/// The pure DEM's flux for grains of `radius`: the mean over its pours.
 fn dem_flux(rows: &[Row], radius: f64) -> f64 {
     rows.iter()
         .find(|r| r.cell == 0.0 && r.radius == radius)
-        .map_or(f64::NAN, |r| r.flux)
+        .map_or(f64::NAN, |r| mean_sd(&r.pours).0)
+}
+
+/// Mean and sample standard deviation (0 for one value).
+fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 {
+        v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    (mean, var.sqrt())
 }
 
 fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
@@ -358,11 +397,14 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
         "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
          from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
          solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
-         hybrid's. Flux: Σ m v_x / L at the end of the window. Coupled band: {} cell(s). Continuum: {}.\n\n\
+         hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
+         of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
+         Continuum: {}.\n\n\
          | run | r mm | H mm | N_i | F | MPM points | k | wall s | speed-up | DEM / MPM compute ms per macro-step | flux kg/(m s) | flux vs DEM |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         args.depth,
         args.window,
+        args.pours,
         args.band,
         match args.continuum {
             Continuum::Scene => "the scene's",
@@ -372,8 +414,12 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     );
     for r in rows {
         let speedup = dem_wall(rows, r.radius) / r.sample.wall;
+        let flux = match mean_sd(&r.pours) {
+            (mean, sd) if r.pours.len() > 1 => format!("{mean:.3} ± {sd:.3}"),
+            _ => format!("{:.3}", r.flux),
+        };
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {:.3} | {} | {} | {:.1} | {:.2}× | {:.2} / {:.2} | {:.3} | {:+.1}% |\n",
+            "| {} | {} | {} | {} | {:.3} | {} | {} | {:.1} | {:.2}× | {:.2} / {:.2} | {} | {:+.1}% |\n",
             if r.cell == 0.0 {
                 "DEM".into()
             } else {
@@ -389,8 +435,17 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
             speedup,
             1e3 * r.sample.dem_step,
             1e3 * r.sample.mpm_step,
-            r.flux,
+            flux,
             100.0 * (r.flux / dem_flux(rows, r.radius) - 1.0)
+        ));
+    }
+    for r in rows.iter().filter(|r| r.pours.len() > 1) {
+        let each: Vec<String> = r.pours.iter().map(|f| format!("{f:.3}")).collect();
+        md.push_str(&format!(
+            "\nThe pure DEM's flux at r = {} mm on its {} pours: {} kg/(m s).\n",
+            r.radius * 1e3,
+            r.pours.len(),
+            each.join(", ")
         ));
     }
     if let Some(best) = rows
@@ -475,4 +530,59 @@ fn extrapolate(c: &Costs, rows: &[Row], depth: f64) -> String {
         md.push_str(&format!("| {} | {:.3} | {} |\n", r.cell * 1e3, f, cells.join(" | ")));
     }
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(cell: f64, flux: f64, pours: Vec<f64>) -> Row {
+        let sample = Sample {
+            grains: 100.0,
+            points: 0.0,
+            substeps: 20,
+            steps: 10,
+            wall: 1.0,
+            dem_step: 1e-3,
+            mpm_step: 0.0,
+        };
+        Row {
+            radius: 5e-4,
+            cell,
+            depth: 1.0,
+            grains: 100,
+            dem_grains: 100,
+            points: 0,
+            sample,
+            flux,
+            pours,
+        }
+    }
+
+    /// The hybrid is compared with the mean of the DEM's pours, not its first pour, and the
+    /// table shows the pours' spread (the sample standard deviation).
+    #[test]
+    fn the_hybrid_is_compared_with_the_mean_of_the_pours() {
+        let rows = [row(0.0, 36.0, vec![36.0, 30.0, 33.0]), row(0.004, 36.3, Vec::new())];
+        assert_eq!(dem_flux(&rows, 5e-4), 33.0);
+        assert_eq!(mean_sd(&[36.0, 30.0, 33.0]), (33.0, 3.0));
+        assert_eq!(mean_sd(&[36.0]), (36.0, 0.0));
+        let args = ChuteArgs {
+            scenes: "scenes".into(),
+            radii: vec![0.5],
+            depth: 0.05,
+            depths: vec![0.05],
+            cells: vec![0.004],
+            band: 1.0,
+            window: 0.1,
+            out: "out".into(),
+            continuum: Continuum::Scene,
+            cell_grains: 2400,
+            pours: 3,
+        };
+        let md = table(&args, &rows, None);
+        assert!(md.contains("| 33.000 ± 3.000 | +9.1% |"), "{md}");
+        assert!(md.contains("| 36.300 | +10.0% |"), "{md}");
+        assert!(md.contains("on its 3 pours: 36.000, 30.000, 33.000 kg/(m s)"), "{md}");
+    }
 }
