@@ -51,6 +51,14 @@ fn every_hybrid_scene_takes_its_continuum_from_grains_calibrate() {
             Some(k) => k,
             None => {
                 let (_, c) = run_for(&s, &test).unwrap();
+                // A consolidated 2D packing of disks of a few per cent polydispersity: 0.80–0.85
+                // (the grains' area over the box's; a diameter taken for a radius is 4 times it).
+                assert!(
+                    (0.78..0.86).contains(&c.packing),
+                    "{}: the sample's packing {}",
+                    path.display(),
+                    c.packing
+                );
                 checked.push((key, test, c));
                 checked.len() - 1
             }

@@ -12,8 +12,9 @@
 //! In 2D the Mohr–Coulomb friction angle φ of the principal stresses σ1 ≥ σ3 (compression
 //! positive) is sin φ = (σ1 − σ3) / (σ1 + σ3). The continuum of grains is Drucker–Prager with
 //! the plane Mohr–Coulomb cone (‖dev τ‖ = √2 sin φ p, `DruckerPragerYue::new`), perfectly
-//! plastic, so it takes the critical-state angle: the mean over axial strains 15–30 %, after the
-//! peak. Its Young's modulus is the initial one: the deviator's least-squares slope over the
+//! plastic, so by default it takes the critical-state angle: the mean over axial strains
+//! 15–30 %, after the peak; `--strength peak` takes the peak instead, for a continuum that the
+//! run shears less than the peak's strain. Its Young's modulus is the initial one: the deviator's least-squares slope over the
 //! first 0.1 % of axial strain, E = (1 − ν²) Δσ1 / Δε1 with the scene's ν (Yue 2018 §3.3:
 //! ν = 0.3); the secant modulus at half the peak (E50) is printed beside it. (An isotropic
 //! unloading from 1.1 p0 to 0.9 p0 was tried for a bulk modulus: the sample's creep at p0 is
@@ -127,6 +128,9 @@ pub struct Calibration {
     pub e0_plane: f64,
     /// The mean lateral stress over the critical-state window, over p0 (the servo's hold).
     pub lateral_mean: f64,
+    /// The sample's packing fraction when the shortening starts (grain area over the box's):
+    /// the peak belongs to this state, and a denser bed has a higher one.
+    pub packing: f64,
 }
 
 impl Calibration {
@@ -299,6 +303,7 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
     // strain.
     let (sx0, sy0, w0, h0) = run(&mut state, &mut pipe, SERVO_STEPS);
     let q0 = sy0 - sx0;
+    let packing = state.grains.radius.iter().map(|r| std::f64::consts::PI * r * r).sum::<f64>() / (w0 * h0);
     let mut records = Vec::new();
     // Records every 0.02 % of axial strain up to 0.5 % (the start), then every 0.25 %.
     let mut next = FINE;
@@ -391,6 +396,7 @@ pub fn biaxial(scene: &Scene, material: usize, grains: usize, pressure: f64, ine
         e50_plane,
         e0_plane,
         lateral_mean,
+        packing,
     })
 }
 
@@ -500,7 +506,7 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
     println!(
         "# {} grains at p0 = {:.1} Pa, axial rate {:.3e} 1/s: peak {:.2} deg, critical state {:.2} deg (sd {:.2}); \
          E = {young:.4e} Pa from the initial slope {:.4e} Pa (plane strain, nu = {}); secant E50 = {:.4e} Pa; \
-         mean sigma3 over the window {:.3} p0",
+         mean sigma3 over the window {:.3} p0; packing fraction at the start of the shortening {:.4}",
         c.grains,
         c.pressure,
         c.strain_rate,
@@ -511,6 +517,7 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
         mpm.poisson,
         c.young_of(c.e50_plane, mpm.poisson),
         c.lateral_mean,
+        c.packing,
     );
     if args.write {
         let text = std::fs::read_to_string(&args.scene)?;
@@ -697,6 +704,7 @@ mod tests {
             e50_plane: 1e5,
             e0_plane: 5e5,
             lateral_mean: 1.0,
+            packing: 0.82,
         };
         let p = provenance(&c, &o);
         assert!(
