@@ -71,6 +71,10 @@ const SCENE: &str = "chute_hybrid_2d.toml";
 const LENGTH: f64 = 0.2;
 /// DEM steps per macro-step of the pure DEM runs.
 const DEM_SUBSTEPS: u32 = 20;
+/// Slabs of the velocity profile, parallel to the floor [m].
+const SLAB: f64 = 2.5e-3;
+/// The share of the layer's mass, from the top, whose mean velocity is the surface's.
+const SURFACE: f64 = 0.2;
 
 /// The grains of one size: radius and spread, and the layer between the glued row and the top.
 fn grains(r: f64) -> Vec<String> {
@@ -193,6 +197,9 @@ struct Row {
     flux: f64,
     /// The pure DEM's: its flux on every pour, the first (`flux`) included; empty for a hybrid.
     pours: Vec<f64>,
+    /// Mass and down-slope momentum per `SLAB` above y = 0 at the end (grains and points; the
+    /// pure DEM's summed over its pours).
+    profile: Vec<(f64, f64)>,
 }
 
 impl Row {
@@ -201,8 +208,62 @@ impl Row {
     }
 }
 
-fn one(args: &ChuteArgs, label: &str, overrides: &[String]) -> anyhow::Result<(Sample, u64, u64, f64)> {
-    let (dir, scene) = super::run_resolved(&args.scenes.join(SCENE), label, overrides, &args.out, false)?;
+/// Mass and down-slope momentum per `SLAB` of height at the run's last frame, grains and
+/// points together.
+fn profile(dir: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
+    let mut slabs: Vec<(f64, f64)> = Vec::new();
+    for name in ["grains.pvd", "points.pvd"] {
+        let pvd = dir.join("frames").join(name);
+        if !pvd.exists() {
+            continue;
+        }
+        let frames = grains_service::vtu::collection(&pvd)?;
+        let (_, last) = frames.last().with_context(|| format!("{}: no frame", pvd.display()))?;
+        let f = grains_service::vtu::Frame::read(last)?;
+        let (m, v) = (f.array("mass"), f.array("velocity"));
+        let (m, v) = m.zip(v).with_context(|| format!("{}: no mass or velocity", last.display()))?;
+        for (k, x) in f.points.iter().enumerate() {
+            let slab = (x[1] / SLAB).floor().max(0.0) as usize;
+            if slabs.len() <= slab {
+                slabs.resize(slab + 1, (0.0, 0.0));
+            }
+            slabs[slab].0 += m[k];
+            slabs[slab].1 += m[k] * v[3 * k];
+        }
+    }
+    Ok(slabs)
+}
+
+/// The mean velocity of the top `SURFACE` of the mass, and the profile's L1 distance from
+/// `reference`'s relative to its mean speed (Σ m |v − v_ref| / Σ m |v_ref|, by slab with
+/// the reference's masses).
+fn compare(profile: &[(f64, f64)], reference: &[(f64, f64)]) -> (f64, f64) {
+    let v = |p: &[(f64, f64)], k: usize| p.get(k).filter(|s| s.0 > 0.0).map_or(0.0, |s| s.1 / s.0);
+    let (mut diff, mut norm) = (0.0, 0.0);
+    for (k, &(m, _)) in reference.iter().enumerate() {
+        diff += m * (v(profile, k) - v(reference, k)).abs();
+        norm += m * v(reference, k).abs();
+    }
+    (surface(profile), diff / norm)
+}
+
+/// The mean velocity of the top `SURFACE` share of the mass.
+fn surface(profile: &[(f64, f64)]) -> f64 {
+    let total: f64 = profile.iter().map(|s| s.0).sum();
+    let (mut m, mut p) = (0.0, 0.0);
+    for &(ms, ps) in profile.iter().rev() {
+        let take = (SURFACE * total - m).min(ms).max(0.0);
+        if take <= 0.0 {
+            break;
+        }
+        m += take;
+        p += ps * take / ms;
+    }
+    p / m
+}
+
+fn one(args: &ChuteArgs, label: &str, overrides: &[String]) -> anyhow::Result<(Sample, u64, u64, f64, Vec<(f64, f64)>)> {
+    let (dir, scene) = super::run_resolved(&args.scenes.join(SCENE), label, overrides, &args.out, true)?;
     let t = crate::metrics::MetricsTable::read(&dir)?;
     let col = |role, what| -> anyhow::Result<Vec<f64>> { Ok(t.participant(role, what)?.unwrap_or_default()) };
     let mean = |v: Vec<f64>| {
@@ -228,6 +289,7 @@ fn one(args: &ChuteArgs, label: &str, overrides: &[String]) -> anyhow::Result<(S
         first(col(Role::Dem, "items")?),
         first(col(Role::Mpm, "items")?),
         flux,
+        profile(&dir)?,
     ))
 }
 
@@ -253,6 +315,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
         // per-macro-step cost (summaries, metrics) stays out of the DEM's figure.
         let mut dem = None;
         let mut pours = Vec::new();
+        let mut dem_profile: Vec<(f64, f64)> = Vec::new();
         for seed in 1..=args.pours {
             let mut o = [base.clone(), on(&packing(args, r, seed)?).into()].concat();
             o.extend([
@@ -264,8 +327,15 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                 format!("run.seed={seed}"),
             ]);
             let pour = if seed == 1 { String::new() } else { format!(" seed={seed}") };
-            let (sample, grains, _, flux) = one(args, &format!("DEM r={radius_mm}mm{pour}"), &o)?;
+            let (sample, grains, _, flux, profile) = one(args, &format!("DEM r={radius_mm}mm{pour}"), &o)?;
             pours.push(flux);
+            if dem_profile.len() < profile.len() {
+                dem_profile.resize(profile.len(), (0.0, 0.0));
+            }
+            for (d, p) in dem_profile.iter_mut().zip(profile) {
+                d.0 += p.0;
+                d.1 += p.1;
+            }
             dem.get_or_insert((sample, grains, flux));
         }
         let (sample, dem_grains, flux) = dem.expect("at least one pour");
@@ -279,6 +349,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             sample,
             flux,
             pours,
+            profile: dem_profile,
         });
         base.extend(on(&first));
         for &h in &args.cells {
@@ -294,7 +365,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                     "run.threads=2".into(),
                 ]);
                 let label = format!("hybrid r={radius_mm}mm H={}mm depth={f}", h * 1e3);
-                let (sample, grains, points, flux) = one(args, &label, &o)?;
+                let (sample, grains, points, flux, profile) = one(args, &label, &o)?;
                 rows.push(Row {
                     radius: r,
                     cell: h,
@@ -305,6 +376,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                     sample,
                     flux,
                     pours: Vec::new(),
+                    profile,
                 });
             }
         }
@@ -400,8 +472,11 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
          hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
          of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
          Continuum: {}.\n\n\
-         | run | r mm | H mm | N_i | F | MPM points | k | wall s | speed-up | DEM / MPM compute ms per macro-step | flux kg/(m s) | flux vs DEM |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         Surface: the mean down-slope velocity of the top {:.0}% of the mass; profile L1: Σ m |v − v_DEM| / Σ m |v_DEM| over \
+         {} mm slabs above the floor (the pure DEM's over its pours), at the end of the window: a flux can agree while the \
+         profile does not.\n\n\
+         | run | r mm | H mm | N_i | F | MPM points | k | wall s | speed-up | DEM / MPM compute ms per macro-step | flux kg/(m s) | flux vs DEM | surface m/s | vs DEM | profile L1 |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         args.depth,
         args.window,
         args.pours,
@@ -410,7 +485,9 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
             Continuum::Scene => "the scene's",
             Continuum::CriticalState =>
                 "critical-state softening (Chen 2021) fitted to the shear cell's first shear per grain size, from the poured bed's packing",
-        }
+        },
+        100.0 * SURFACE,
+        1e3 * SLAB,
     );
     for r in rows {
         let speedup = dem_wall(rows, r.radius) / r.sample.wall;
@@ -418,8 +495,13 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
             (mean, sd) if r.pours.len() > 1 => format!("{mean:.3} ± {sd:.3}"),
             _ => format!("{:.3}", r.flux),
         };
+        let dem_profile = rows
+            .iter()
+            .find(|d| d.cell == 0.0 && d.radius == r.radius)
+            .map_or(&[][..], |d| d.profile.as_slice());
+        let (surface_v, l1) = compare(&r.profile, dem_profile);
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {:.3} | {} | {} | {:.1} | {:.2}× | {:.2} / {:.2} | {} | {:+.1}% |\n",
+            "| {} | {} | {} | {} | {:.3} | {} | {} | {:.1} | {:.2}× | {:.2} / {:.2} | {} | {:+.1}% | {:.4} | {:+.1}% | {:.2} |\n",
             if r.cell == 0.0 {
                 "DEM".into()
             } else {
@@ -436,7 +518,10 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
             1e3 * r.sample.dem_step,
             1e3 * r.sample.mpm_step,
             flux,
-            100.0 * (r.flux / dem_flux(rows, r.radius) - 1.0)
+            100.0 * (r.flux / dem_flux(rows, r.radius) - 1.0),
+            surface_v,
+            100.0 * (surface_v / surface(dem_profile) - 1.0),
+            l1
         ));
     }
     for r in rows.iter().filter(|r| r.pours.len() > 1) {
@@ -556,6 +641,7 @@ mod tests {
             sample,
             flux,
             pours,
+            profile: vec![(1.0, 0.0), (1.0, 0.1), (1.0, 0.2)],
         }
     }
 
@@ -581,8 +667,26 @@ mod tests {
             pours: 3,
         };
         let md = table(&args, &rows, None);
-        assert!(md.contains("| 33.000 ± 3.000 | +9.1% |"), "{md}");
-        assert!(md.contains("| 36.300 | +10.0% |"), "{md}");
+        assert!(md.contains("| 33.000 ± 3.000 | +9.1% | 0.2000 | +0.0% | 0.00 |"), "{md}");
+        assert!(md.contains("| 36.300 | +10.0% | 0.2000 | +0.0% | 0.00 |"), "{md}");
         assert!(md.contains("on its 3 pours: 36.000, 30.000, 33.000 kg/(m s)"), "{md}");
+    }
+
+    /// A plug riding on a slip at the floor carries a shear profile's flux with another
+    /// shape: the same momentum, a slower surface and an L1 distance the flux cannot show.
+    #[test]
+    fn a_plug_with_the_shear_profiles_flux_is_told_apart() {
+        // Unit masses in five slabs: shear 0, 0.1, 0.2, 0.3, 0.4 m/s; plug 0 then 0.25.
+        let shear: Vec<(f64, f64)> = (0..5).map(|k| (1.0, 0.1 * k as f64)).collect();
+        let plug: Vec<(f64, f64)> = (0..5).map(|k| (1.0, if k == 0 { 0.0 } else { 0.25 })).collect();
+        let sum = |p: &[(f64, f64)]| p.iter().map(|s| s.1).sum::<f64>();
+        assert!((sum(&shear) - sum(&plug)).abs() < 1e-12);
+        // The top fifth of the mass is the top slab.
+        assert!((surface(&shear) - 0.4).abs() < 1e-12 && (surface(&plug) - 0.25).abs() < 1e-12);
+        let (v, l1) = compare(&plug, &shear);
+        assert!((v - 0.25).abs() < 1e-12);
+        // |0| + 0.15 + 0.05 + 0.05 + 0.15 over 0 + 0.1 + 0.2 + 0.3 + 0.4.
+        assert!((l1 - 0.4).abs() < 1e-12, "{l1}");
+        assert_eq!(compare(&shear, &shear).1, 0.0);
     }
 }
