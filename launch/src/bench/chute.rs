@@ -262,7 +262,10 @@ fn surface(profile: &[(f64, f64)]) -> f64 {
     p / m
 }
 
-fn one(args: &ChuteArgs, label: &str, overrides: &[String]) -> anyhow::Result<(Sample, u64, u64, f64, Vec<(f64, f64)>)> {
+/// What one run gives: its costs, its grains and points at the start, its flux and profile.
+type Outcome = (Sample, u64, u64, f64, Vec<(f64, f64)>);
+
+fn one(args: &ChuteArgs, label: &str, overrides: &[String]) -> anyhow::Result<Outcome> {
     let (dir, scene) = super::run_resolved(&args.scenes.join(SCENE), label, overrides, &args.out, true)?;
     let t = crate::metrics::MetricsTable::read(&dir)?;
     let col = |role, what| -> anyhow::Result<Vec<f64>> { Ok(t.participant(role, what)?.unwrap_or_default()) };
