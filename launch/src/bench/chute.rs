@@ -309,10 +309,11 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             format!("run.duration={}", args.window),
         ]);
         let dt = dem_step(&args.scenes.join(SCENE), &base)?;
-        let on = |packing: &Path| [format!("body.0.packing={:?}", packing.display().to_string())];
+        let on = |packing: &Path| format!("body.0.packing={:?}", packing.display().to_string());
+        let on_first: Vec<String> = base.iter().cloned().chain([on(&first)]).collect();
         let continuum = match args.continuum {
             Continuum::Scene => Vec::new(),
-            Continuum::CriticalState => critical_state_overrides(args, &[base.clone(), on(&first).into()].concat(), &first)?,
+            Continuum::CriticalState => critical_state_overrides(args, &on_first, &first)?,
         };
         // The pure DEM on every pour. The same DEM step, 20 to a macro-step: the launcher's
         // per-macro-step cost (summaries, metrics) stays out of the DEM's figure.
@@ -320,7 +321,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
         let mut pours = Vec::new();
         let mut dem_profile: Vec<(f64, f64)> = Vec::new();
         for seed in 1..=args.pours {
-            let mut o = [base.clone(), on(&packing(args, r, seed)?).into()].concat();
+            let mut o: Vec<String> = base.iter().cloned().chain([on(&packing(args, r, seed)?)]).collect();
             o.extend([
                 "body.0.model=\"dem\"".into(),
                 format!("coupling.substeps={DEM_SUBSTEPS}"),
@@ -354,7 +355,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             pours,
             profile: dem_profile,
         });
-        base.extend(on(&first));
+        let base = on_first;
         for &h in &args.cells {
             for &f in &args.depths {
                 let mut o = base.clone();

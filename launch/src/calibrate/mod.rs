@@ -14,8 +14,8 @@
 //! the plane Mohr–Coulomb cone (‖dev τ‖ = √2 sin φ p, `DruckerPragerYue::new`), perfectly
 //! plastic, so by default it takes the critical-state angle: the mean over axial strains
 //! 15–30 %, after the peak; `--strength peak` takes the peak instead, for a continuum that the
-//! run shears less than the peak's strain. Its Young's modulus is the initial one: the deviator's least-squares slope over the
-//! first 0.1 % of axial strain, E = (1 − ν²) Δσ1 / Δε1 with the scene's ν (Yue 2018 §3.3:
+//! run shears less than the peak's strain. Its Young's modulus is the initial one: the
+//! deviator's least-squares slope over the first 0.1 % of axial strain, E = (1 − ν²) Δσ1 / Δε1 with the scene's ν (Yue 2018 §3.3:
 //! ν = 0.3); the secant modulus at half the peak (E50) is printed beside it. (An isotropic
 //! unloading from 1.1 p0 to 0.9 p0 was tried for a bulk modulus: the sample's creep at p0 is
 //! of the same size as the elastic volume change, and the modulus came out negative.)
@@ -65,12 +65,12 @@ pub struct CalibrateArgs {
     /// critical state (flows that shear far past the peak: collapses, silos) or the peak
     /// (dense material sheared less than the peak's strain over the run: a flow starting from
     /// rest, a pile).
-    #[arg(long, value_enum, default_value_t = Strength::Critical)]
+    #[arg(long, value_enum, default_value_t = Strength::Critical, conflicts_with = "shear")]
     pub strength: Strength,
     /// Friction coefficient of the grains while the sample consolidates (restored before the
     /// shortening): lower gives a denser sample, for a peak at the state of a bed poured
     /// denser than the default sample (Chen 2021 §4.1 prepares dense packings at μ = 0.01).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "shear")]
     pub prep_friction: Option<f64>,
     /// Write the result into the scene file's `[material.mpm]` (the biaxial test's).
     #[arg(long)]
