@@ -217,97 +217,22 @@ pub fn biaxial(scene: &Scene, material: usize, o: &CalibrateOptions) -> anyhow::
     let cols = (grains as f64 * 3f64.sqrt() / 4.0).sqrt().round().max(4.0);
     let width = cols * spacing + 2.0 * r_max;
     let height = 2.0 * width;
-    let mut rng = Rng::new(seed);
-    let sites = lattice_in_box::<D2>([0.0; 3], [width, height, 0.0], spacing, 1.01 * r_max, 0.01 * dem.radius, &mut rng);
-    let mut state = DemState::<D2> {
-        grains: Grains::default(),
-        bodies: Vec::new(),
-        walls: vec![
-            Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([1.0, 0.0, 0.0]), 0.0),
-            Wall::plane(D2::from_array([width, 0.0, 0.0]), D2::from_array([-1.0, 0.0, 0.0]), 0.0),
-            Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([0.0, 1.0, 0.0]), 0.0),
-            Wall::plane(D2::from_array([0.0, height, 0.0]), D2::from_array([0.0, -1.0, 0.0]), 0.0),
-        ],
-        params: DemParams {
-            materials: vec![params],
-            gravity: D2::from_array([0.0; 3]),
-            domain: Domain {
-                min: [-width, -height, 0.0],
-                max: [2.0 * width, 2.0 * height, 0.0],
-                periodic: [false; 3],
-            },
-            skin: 0.1 * d,
-        },
-        time: 0.0,
-    };
-    for (k, &x) in sites.iter().enumerate() {
-        let r = radius(&mut rng, dem.radius, dem.radius_std);
-        state.grains.push(k as u64, x, r, Grains::<D2>::mass_of(r, mat.density), 0);
-    }
+    let mut state = box_sample(mat, width, height, seed)?;
     let n = state.grains.len();
     let (safe, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
     let dt = safe;
     let mut pipe = DemPipeline::<D2>::new(THREADS)?;
     // The axial strain rate of inertial number I: ε̇ = I / (d √(ρ / p0)).
     let rate = inertial / (d * (mat.density / pressure).sqrt());
-    // The stresses on the walls averaged over `n` steps (a single step's load rattles with the
-    // grains' vibrations), and the box's width and height after them.
-    let run = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, n: usize| -> (f64, f64, f64, f64) {
-        let (mut fx, mut fy) = (0.0, 0.0);
-        for _ in 0..n {
-            pipe.run(st, dt, 1);
-            fx += 0.5 * (st.walls[0].load[0].abs() + st.walls[1].load[0].abs());
-            fy += 0.5 * (st.walls[2].load[1].abs() + st.walls[3].load[1].abs());
-        }
-        let w = wall_at(&st.walls[1], 0) - wall_at(&st.walls[0], 0);
-        let h = wall_at(&st.walls[3], 1) - wall_at(&st.walls[2], 1);
-        // Loads are the grains' push on each wall [N/m]; stress = load / length [Pa].
-        (fx / n as f64 / h, fy / n as f64 / w, w, h)
-    };
-    // The walls are servo-controlled every SERVO_STEPS steps: a wall moves at
-    // GAIN × 10 ε̇ L times the relative stress error (clamped to ±1), closing while the
-    // stress is below the target and opening above it (a larger gain rings: the stress on the
-    // walls swings from one interval to the next).
-    const SERVO_STEPS: usize = 50;
     const FINE: f64 = 0.0002;
-    const GAIN: f64 = 0.1;
     // The consolidation is preparation: its walls move at the quasi-static rate (I = 1e-3)
     // whatever the shear's (faster, they ring and the sample never settles: seen at 1e-2).
     let settle_rate = rate.min(1e-3 / (d * (mat.density / pressure).sqrt()));
-    let servo = |st: &mut DemState<D2>, wall: usize, axis: usize, measured: f64, target: f64, length: f64| {
-        let error = ((target - measured) / target).clamp(-1.0, 1.0);
-        let mut v = [0.0; 3];
-        v[axis] = -error * GAIN * 10.0 * settle_rate * length;
-        st.walls[wall].velocity = D2::from_array(v);
-    };
-    // Isotropic consolidation to `target`: the right and top walls move until both sides hold
-    // it within 2 % and the grains are nearly at rest (at most 2 s of simulated time); the
-    // box's width and height then.
-    let settle = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, target: f64| -> anyhow::Result<(f64, f64)> {
-        for _ in 0..((2.0 / dt) as usize / SERVO_STEPS) {
-            if grains_service::signals::signalled() {
-                bail!("stopped by a signal");
-            }
-            let (sxx, syy, w, h) = run(st, pipe, SERVO_STEPS);
-            // Preparation only: the grains' velocities are damped (2 % per servo interval) so
-            // that the sample comes to rest; the shear that is measured runs without it.
-            st.grains.v.iter_mut().for_each(|v| *v *= 0.98);
-            st.grains.omega.iter_mut().for_each(|w| *w *= 0.98);
-            let ke = DemPipeline::kinetic_energy(st);
-            tracing::trace!("consolidation to {target:.1} Pa: σxx {sxx:.1} σyy {syy:.1} Pa, w {w:.5} h {h:.5} m, ke {ke:.3e} J");
-            if (sxx / target - 1.0).abs() < 0.02 && (syy / target - 1.0).abs() < 0.02 && ke < 1e-5 * target * w * h {
-                st.walls.iter_mut().for_each(|w| w.velocity = D2::from_array([0.0; 3]));
-                return Ok((w, h));
-            }
-            servo(st, 1, 0, sxx, target, w);
-            servo(st, 3, 1, syy, target, h);
-        }
-        bail!("the sample did not settle at {target:.1} Pa within 2 s: stiffness, pressure or grain count out of reach")
-    };
+    let run = |st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, n: usize| box_stresses(st, pipe, dt, n);
     if let Some(mu) = o.prep_friction {
         state.params.materials[0].friction = mu;
     }
-    settle(&mut state, &mut pipe, pressure)?;
+    consolidate_box(&mut state, &mut pipe, dt, pressure, settle_rate)?;
     state.params.materials[0].friction = params.friction;
     // Shear: the top wall moves down at ε̇ H0, the right wall holds σ3 = p0, to 30 % of axial
     // strain.
@@ -408,6 +333,112 @@ pub fn biaxial(scene: &Scene, material: usize, o: &CalibrateOptions) -> anyhow::
         lateral_mean,
         packing,
     })
+}
+
+/// A box sample of `mat`'s grains (2D): a jittered lattice spaced just over the largest
+/// diameter (so that nothing overlaps) in a box `width` × `height` from the origin, no
+/// gravity, between four frictionless plane walls: left, right, bottom, top.
+pub(crate) fn box_sample(mat: &scene::Material, width: f64, height: f64, seed: u64) -> anyhow::Result<DemState<D2>> {
+    let dem = mat.dem.as_ref().context("a DEM material")?;
+    let r_max = dem.radius + 2.0 * dem.radius_std;
+    let d = 2.0 * dem.radius;
+    let mut rng = Rng::new(seed);
+    let sites = lattice_in_box::<D2>(
+        [0.0; 3],
+        [width, height, 0.0],
+        2.04 * r_max,
+        1.01 * r_max,
+        0.01 * dem.radius,
+        &mut rng,
+    );
+    let params = grains_dem_service::setup::contact_params(dem);
+    let mut state = DemState::<D2> {
+        grains: Grains::default(),
+        bodies: Vec::new(),
+        walls: vec![
+            Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([1.0, 0.0, 0.0]), 0.0),
+            Wall::plane(D2::from_array([width, 0.0, 0.0]), D2::from_array([-1.0, 0.0, 0.0]), 0.0),
+            Wall::plane(D2::from_array([0.0, 0.0, 0.0]), D2::from_array([0.0, 1.0, 0.0]), 0.0),
+            Wall::plane(D2::from_array([0.0, height, 0.0]), D2::from_array([0.0, -1.0, 0.0]), 0.0),
+        ],
+        params: DemParams {
+            materials: vec![params],
+            gravity: D2::from_array([0.0; 3]),
+            domain: Domain {
+                min: [-width, -height, 0.0],
+                max: [2.0 * width, 2.0 * height, 0.0],
+                periodic: [false; 3],
+            },
+            skin: 0.1 * d,
+        },
+        time: 0.0,
+    };
+    for (k, &x) in sites.iter().enumerate() {
+        let r = radius(&mut rng, dem.radius, dem.radius_std);
+        state.grains.push(k as u64, x, r, Grains::<D2>::mass_of(r, mat.density), 0);
+    }
+    Ok(state)
+}
+
+/// The walls of a box sample are servo-controlled every SERVO_STEPS steps: a wall moves at
+/// GAIN × 10 ε̇ L times the relative stress error (clamped to ±1), closing while the stress is
+/// below the target and opening above it (a larger gain rings: the stress on the walls swings
+/// from one interval to the next).
+const SERVO_STEPS: usize = 50;
+const GAIN: f64 = 0.1;
+
+/// The stresses σxx, σyy [Pa] on the walls of a box sample (walls left, right, bottom, top:
+/// planes, in that order) averaged over `n` steps of dt (a single step's load rattles with the
+/// grains' vibrations), and the box's width and height after them.
+pub(crate) fn box_stresses(st: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, dt: f64, n: usize) -> (f64, f64, f64, f64) {
+    let (mut fx, mut fy) = (0.0, 0.0);
+    for _ in 0..n {
+        pipe.run(st, dt, 1);
+        fx += 0.5 * (st.walls[0].load[0].abs() + st.walls[1].load[0].abs());
+        fy += 0.5 * (st.walls[2].load[1].abs() + st.walls[3].load[1].abs());
+    }
+    let w = wall_at(&st.walls[1], 0) - wall_at(&st.walls[0], 0);
+    let h = wall_at(&st.walls[3], 1) - wall_at(&st.walls[2], 1);
+    // Loads are the grains' push on each wall [N/m]; stress = load / length [Pa].
+    (fx / n as f64 / h, fy / n as f64 / w, w, h)
+}
+
+/// Isotropic consolidation of a box sample ([`box_stresses`]' walls) to `target` [Pa]: the
+/// right and top walls move, at most at `rate` [1/s] times GAIN × 10, until both sides hold it
+/// within 2 % and the grains are nearly at rest (at most 2 s of simulated time); the box's
+/// width and height then, its walls stopped.
+pub(crate) fn consolidate_box(
+    st: &mut DemState<D2>,
+    pipe: &mut DemPipeline<D2>,
+    dt: f64,
+    target: f64,
+    rate: f64,
+) -> anyhow::Result<(f64, f64)> {
+    let servo = |st: &mut DemState<D2>, wall: usize, axis: usize, measured: f64, length: f64| {
+        let error = ((target - measured) / target).clamp(-1.0, 1.0);
+        let mut v = [0.0; 3];
+        v[axis] = -error * GAIN * 10.0 * rate * length;
+        st.walls[wall].velocity = D2::from_array(v);
+    };
+    for _ in 0..((2.0 / dt) as usize / SERVO_STEPS) {
+        if grains_service::signals::signalled() {
+            bail!("stopped by a signal");
+        }
+        let (sxx, syy, w, h) = box_stresses(st, pipe, dt, SERVO_STEPS);
+        // Preparation only: the grains' velocities are damped (2 % per servo interval) so
+        // that the sample comes to rest; the shear that is measured runs without it.
+        st.grains.v.iter_mut().for_each(|v| *v *= 0.98);
+        st.grains.omega.iter_mut().for_each(|w| *w *= 0.98);
+        let ke = DemPipeline::kinetic_energy(st);
+        tracing::trace!("consolidation to {target:.1} Pa: σxx {sxx:.1} σyy {syy:.1} Pa, w {w:.5} h {h:.5} m, ke {ke:.3e} J");
+        if (sxx / target - 1.0).abs() < 0.02 && (syy / target - 1.0).abs() < 0.02 && ke < 1e-5 * target * w * h {
+            st.walls.iter_mut().for_each(|w| w.velocity = D2::from_array([0.0; 3]));
+            return Ok((w, h));
+        }
+        servo(st, 1, 0, sxx, w);
+        servo(st, 3, 1, syy, h);
+    }
+    bail!("the sample did not settle at {target:.1} Pa within 2 s: stiffness, pressure or grain count out of reach")
 }
 
 /// A plane wall's position along `axis`.

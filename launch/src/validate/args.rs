@@ -26,10 +26,13 @@ pub enum PartName {
     /// Plate indentation (Chen 2021 §6.3): the plate's force against its depth, DEM and
     /// continuum.
     Plate,
+    /// Biaxial compression (Chen 2021 §6.2) as a DEM with a membrane: the band's thickness
+    /// and inclination, stress and volume against the axial strain.
+    Biaxial,
 }
 
 impl PartName {
-    pub const ALL: [PartName; 9] = [
+    pub const ALL: [PartName; 10] = [
         PartName::Contact,
         PartName::Stability,
         PartName::Column,
@@ -39,6 +42,7 @@ impl PartName {
         PartName::Sdem,
         PartName::Shear,
         PartName::Plate,
+        PartName::Biaxial,
     ];
 
     pub fn name(self) -> &'static str {
@@ -52,6 +56,7 @@ impl PartName {
             PartName::Sdem => "sdem",
             PartName::Shear => "shear",
             PartName::Plate => "plate",
+            PartName::Biaxial => "biaxial",
         }
     }
 
@@ -61,7 +66,7 @@ impl PartName {
     pub fn quick(self) -> bool {
         !matches!(
             self,
-            PartName::Drum | PartName::Cost | PartName::Sdem | PartName::Shear | PartName::Plate
+            PartName::Drum | PartName::Cost | PartName::Sdem | PartName::Shear | PartName::Plate | PartName::Biaxial
         )
     }
 }

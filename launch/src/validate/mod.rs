@@ -119,6 +119,7 @@ fn run_part(p: PartName, args: &ValidateArgs) -> anyhow::Result<Part> {
         PartName::Sdem => sdem::validate(args),
         PartName::Shear => shear::validate(args),
         PartName::Plate => plate::validate(args),
+        PartName::Biaxial => shear::biaxial::validate(args),
     }
 }
 

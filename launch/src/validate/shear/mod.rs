@@ -31,6 +31,7 @@ use grains_oracle::band;
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
+pub(super) mod biaxial;
 mod continuum;
 mod hybrid;
 mod large;

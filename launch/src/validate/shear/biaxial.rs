@@ -1,0 +1,676 @@
+//! Chen 2021 §6.2, the biaxial compression (its "triaxial" test, in 2D), as a DEM: the
+//! specimen of Table 5 (6 × 9.42 cm, 5,910 grains: 60 × 94.2 D50 of the planar shear's
+//! grains), the confining pressure held by a membrane on both sides (App. B: a chain of
+//! mass–spring nodes, k_ms and γ_ms of Table B.1), shortened at Chen's 2 cm/s to 10.61% of
+//! axial strain, the bottom no-slip (the grains within 1.5 D50 of it glued to it), the top a
+//! frictionless platen. The band by App. A over axial strain 5.5–8.5% (Fig. 18: 10 D50 for the
+//! DEM and the hybrid), its inclination against the Mohr–Coulomb and Roscoe angles of the
+//! same run (a band in a biaxial test lies between 45° + ψ/2 and 45° + φ/2 from the σ1 plane:
+//! Vardoulakis 1980, Vermeer 1990), and the stress and volume against the axial strain
+//! (Fig. 17).
+//!
+//! The membrane's nodes are grains of the sample's contact law, a fifth of a diameter in
+//! radius and half a diameter apart (a grain cannot pass between two of them; they touch
+//! only if the membrane shortens by a fifth), each of a grain's mass so that the DEM's step
+//! holds. Each step every free node takes the pressure over half of each of its two segments
+//! along their normal (the pressure integrated over the chain) and the springs' tension along
+//! the segments. The end nodes are fixed to the platens.
+
+use super::SCENE;
+use crate::calibrate::{box_sample, consolidate_box};
+use crate::report::Part;
+use crate::report::chart::{Chart, Kind, Series};
+use anyhow::Context;
+use grains_dem::pipeline::DemPipeline;
+use grains_dem::space::{D2, Space};
+use grains_dem::state::{DemState, Grains};
+use grains_oracle::band;
+use std::fmt::Write as _;
+
+/// Chen's Table 5 in D50, and its 100 kPa over a 1-cm-thick disk as a stress over a
+/// unit-thick one (the planar shear's scaling, [`super::PRESSURE`]'s).
+const HEIGHT_OVER_WIDTH: f64 = 9.42 / 6.0;
+const GRAINS: usize = 5910;
+const PRESSURE: f64 = 1.0e3;
+/// Chen: the top at 2 cm/s for 0.5 s, 10.61% of axial strain.
+const SPEED_OVER_HEIGHT: f64 = 0.02 / 0.0942;
+const END: f64 = 0.1061;
+/// Fig. 18: the incremental strain from 5.5% to 8.5% of axial strain; t_s = 10 D50 (DEM and
+/// hybrid), 7 D50 for the continuum.
+const WINDOW: (f64, f64) = (0.055, 0.085);
+const PAPER_BAND: f64 = 10.0;
+/// As the planar shear's ([`super::BAND_TOLERANCE`]).
+const BAND_TOLERANCE: f64 = 4.0;
+/// App. B, Table B.1: spring [N/m] and damping [N s/m] of the membrane's segments (Chen's
+/// forces per grain are ours: its k_n is ours and its pressure over 1-cm disks is ours over
+/// unit-thick ones).
+const K_MS: f64 = 1.0e4;
+const GAMMA_MS: f64 = 1.0;
+/// The membrane's nodes: radius and spacing [D50].
+const NODE_RADIUS_D: f64 = 0.2;
+const NODE_SPACING_D: f64 = 0.5;
+/// Ids of the membrane's nodes: left chain from MEMBRANE, right chain from MEMBRANE + CHAIN,
+/// bottom to top.
+const MEMBRANE: u64 = 1 << 40;
+const CHAIN: u64 = 1 << 20;
+/// Steps between two records.
+const RECORD: usize = 50;
+/// The span of axial strain the peak friction is averaged over, and the dilatancy at the peak
+/// measured over.
+const PEAK_SPAN: f64 = 0.005;
+/// Steps the membrane settles for before the compression.
+const SETTLE: usize = 2000;
+/// The samples.
+const SEEDS: [u64; 3] = [1, 2, 3];
+/// The glued layer at the bottom [D50].
+const GLUE_D: f64 = 1.5;
+
+/// A membrane on both sides of a box sample: the chains' node ids, bottom to top, and the
+/// pressure, spring and rest length it holds.
+pub(super) struct Membrane {
+    pub chains: [Vec<u64>; 2],
+    pub pressure: f64,
+    pub rest: f64,
+}
+
+impl Membrane {
+    /// Replaces the side walls (0 and 1) of a consolidated box sample (`box_sample`'s walls)
+    /// by membranes at `pressure`, their nodes touching the outermost grains' faces (the walls'
+    /// planes) from the bottom wall to the top; the end nodes frozen. The walls left are the
+    /// bottom (0) and the top (1).
+    pub fn wrap(state: &mut DemState<D2>, pressure: f64, diameter: f64, density: f64) -> Membrane {
+        let wall_x = |k: usize| D2::to_array(plane_point(state, k))[0];
+        let (left, right) = (wall_x(0), wall_x(1));
+        let (bottom, top) = (D2::to_array(plane_point(state, 2))[1], D2::to_array(plane_point(state, 3))[1]);
+        state.walls.drain(0..2);
+        let r = NODE_RADIUS_D * diameter;
+        // The end nodes touch the platens (a frozen node in a wall would load it).
+        let (bottom, top) = (bottom + r, top - r);
+        let n = ((top - bottom) / (NODE_SPACING_D * diameter)).round() as usize + 1;
+        let rest = (top - bottom) / (n - 1) as f64;
+        let mass = Grains::<D2>::mass_of(0.5 * diameter, density);
+        let mut chains = [Vec::new(), Vec::new()];
+        for (side, x) in [(0, left - r), (1, right + r)] {
+            for k in 0..n {
+                let id = MEMBRANE + side as u64 * CHAIN + k as u64;
+                let i = state
+                    .grains
+                    .push(id, D2::from_array([x, bottom + k as f64 * rest, 0.0]), r, mass, 0);
+                state.grains.frozen[i] = k == 0 || k == n - 1;
+                chains[side].push(id);
+            }
+        }
+        Membrane { chains, pressure, rest }
+    }
+
+    /// Sets the external force of every free node (the pressure and the springs at the
+    /// current positions and velocities) and moves the top end nodes with the top platen
+    /// (wall 1), before a step of dt.
+    pub fn load(&self, state: &mut DemState<D2>, dt: f64) {
+        let g = &mut state.grains;
+        let mut at = vec![usize::MAX; 2 * self.chains[0].len()];
+        let n = self.chains[0].len();
+        for i in 0..g.len() {
+            if g.id[i] >= MEMBRANE {
+                let k = g.id[i] - MEMBRANE;
+                at[(k / CHAIN) as usize * n + (k % CHAIN) as usize] = i;
+            }
+        }
+        let top_v = state.walls[1].velocity;
+        for (side, inward) in [(0, 1.0), (1, -1.0)] {
+            let idx = &at[side * n..(side + 1) * n];
+            let x: Vec<DVec2> = idx.iter().map(|&i| g.x[i]).collect();
+            let v: Vec<DVec2> = idx.iter().map(|&i| g.v[i]).collect();
+            let mut f = vec![DVec2::ZERO; n];
+            for k in 0..n - 1 {
+                let e = x[k + 1] - x[k];
+                let len = e.length();
+                let u = e / len;
+                // A membrane slackens when shortened: its springs pull, they do not push (a
+                // chain that pushed would buckle into the sample: at 5% of axial strain its
+                // compression was half the pressure's load on a node).
+                let tension = K_MS * (len - self.rest).max(0.0) + GAMMA_MS * (v[k + 1] - v[k]).dot(u);
+                f[k] += u * tension;
+                f[k + 1] -= u * tension;
+            }
+            for k in 1..n - 1 {
+                // The pressure over half of each segment: p (x_{k+1} − x_{k−1}) / 2 turned
+                // towards the sample (the chains run bottom to top: the left's inward normal is
+                // the tangent turned clockwise).
+                let t = x[k + 1] - x[k - 1];
+                f[k] += DVec2::new(t.y, -t.x) * (0.5 * self.pressure * inward);
+            }
+            for (k, &i) in idx.iter().enumerate() {
+                g.external[i] = f[k];
+            }
+            // The top end rides with the platen and follows the node under it sideways
+            // (within 100 steps): the top of the sample slides on the frictionless platen, and
+            // an end held in x would stretch the membrane across the corner.
+            g.v[idx[n - 1]] = DVec2::new((x[n - 2].x - x[n - 1].x) / (100.0 * dt), top_v.y);
+        }
+    }
+
+    /// The lateral stress the grains take from the membrane [Pa]: the normal force of their
+    /// contacts with both chains' nodes (the elastic part, as the contacts are after a step)
+    /// over twice the height the free nodes span. The pressure acts over that height, so it is p unless
+    /// the springs or the nodes' inertia carry some of the load, or a node left the sample.
+    pub fn traction(&self, pipe: &DemPipeline<D2>, state: &DemState<D2>) -> f64 {
+        let g = &state.grains;
+        let push: f64 = pipe
+            .contact_forces(state)
+            .into_iter()
+            .filter(|&(i, j, ..)| (g.id[i] >= MEMBRANE) != (g.id[j] >= MEMBRANE))
+            .map(|(_, _, f, _)| f.x.abs())
+            .sum();
+        // The free nodes take the pressure from the middle of the first segment to the middle
+        // of the last (the halves at the ends would load the platens' nodes).
+        let y = |k: usize| g.x[g.index_of(self.chains[0][k]).expect("a membrane node")].y;
+        let n = self.chains[0].len();
+        let height = 0.5 * (y(n - 2) + y(n - 1)) - 0.5 * (y(0) + y(1));
+        push / (2.0 * height)
+    }
+
+    /// The area enclosed by the chains' centre lines [m²].
+    pub fn area(&self, state: &DemState<D2>) -> f64 {
+        let g = &state.grains;
+        let at = |id: u64| g.x[g.index_of(id).expect("a membrane node")];
+        let ring: Vec<DVec2> = self.chains[1]
+            .iter()
+            .map(|&id| at(id))
+            .chain(self.chains[0].iter().rev().map(|&id| at(id)))
+            .collect();
+        0.5 * (0..ring.len())
+            .map(|k| {
+                let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
+                p.x * q.y - p.y * q.x
+            })
+            .sum::<f64>()
+            .abs()
+    }
+}
+
+/// The plane's vectors (glam's, through the DEM's space).
+type DVec2 = <D2 as Space>::V;
+
+fn plane_point(state: &DemState<D2>, k: usize) -> <D2 as Space>::V {
+    match state.walls[k].shape {
+        grains_dem::state::WallShape::Plane { point, .. } => point,
+        _ => unreachable!("a box sample's walls are planes"),
+    }
+}
+
+/// One record of the compression.
+#[derive(Clone, Copy, Debug)]
+struct Record {
+    axial: f64,
+    /// 1 − A / A0 (compression positive).
+    volumetric: f64,
+    /// (σ1 − σ3) / (σ1 + σ3), σ3 the membrane's pressure.
+    sin_phi: f64,
+}
+
+/// The DEM biaxial compression of seed `seed`.
+pub(super) struct BiaxialRun {
+    seed: u64,
+    grains: usize,
+    width: f64,
+    height: f64,
+    packing: f64,
+    records: Vec<Record>,
+    /// App. A's band: thickness [D50], the width at half peak of the incremental strain's
+    /// profile across its centre line [D50], the line's angle from the horizontal [°], the
+    /// grains counted.
+    t_s: f64,
+    fwhm: f64,
+    angle: f64,
+    counted: usize,
+    /// The grains' positions at the window's start and the band's (indices into them).
+    x0: Vec<[f64; 2]>,
+    band: Vec<usize>,
+    /// Peak friction (axial strain, °) and the dilatancy angle there [°], and the friction and
+    /// dilatancy angles over the window [°].
+    peak: (f64, f64),
+    psi_peak: f64,
+    phi: f64,
+    psi: f64,
+    /// The lateral stress the grains took from the membrane over the window (the mean of a
+    /// reading per record), over the pressure ([`Membrane::traction`]).
+    lateral: f64,
+    wall: f64,
+}
+
+fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> anyhow::Result<BiaxialRun> {
+    let t0 = std::time::Instant::now();
+    let mat = &scene.materials[material];
+    let dem = mat.dem.as_ref().context("a DEM material")?;
+    let (mu, d) = (dem.friction, 2.0 * dem.radius);
+    let spacing = crate::calibrate::shear::ShearCell::spacing(dem);
+    // A triangular lattice of cols × rows ≈ GRAINS sites in a box HEIGHT_OVER_WIDTH as tall.
+    let cols = (GRAINS as f64 * 3f64.sqrt() / (2.0 * HEIGHT_OVER_WIDTH)).sqrt().round();
+    let width = cols * spacing;
+    let mut state = box_sample(mat, width, HEIGHT_OVER_WIDTH * width, seed)?;
+    let (dt, ..) = grains_dem_service::setup::stable_step(scene).context("the scene's DEM step")?;
+    let mut pipe = DemPipeline::<D2>::new(2)?;
+    // Prepared as the planar shear's (Cundall 1989): consolidated with μ = 0.01.
+    state.params.materials[0].friction = 0.01;
+    let quasi_static = 1e-3 * (PRESSURE / mat.density).sqrt() / d;
+    let (w0, h0) = consolidate_box(&mut state, &mut pipe, dt, PRESSURE, quasi_static).context("consolidating the biaxial sample")?;
+    state.params.materials[0].friction = mu;
+    let sample = state.grains.len();
+    let packing = state.grains.radius.iter().map(|r| std::f64::consts::PI * r * r).sum::<f64>() / (w0 * h0);
+    for i in 0..state.grains.len() {
+        if D2::to_array(state.grains.x[i])[1] < GLUE_D * d {
+            state.grains.frozen[i] = true;
+            state.grains.v[i] = D2::from_array([0.0; 3]);
+            state.grains.omega[i] = 0.0;
+        }
+    }
+    let membrane = Membrane::wrap(&mut state, PRESSURE, d, mat.density);
+    pipe.invalidate();
+    // The membrane settles into the valleys between the outermost grains (its centre lines
+    // enclose some 3% less than the walls did) before the area is taken as the start's.
+    for _ in 0..SETTLE {
+        membrane.load(&mut state, dt);
+        pipe.run(&mut state, dt, 1);
+    }
+    let a0 = membrane.area(&state);
+    let speed = SPEED_OVER_HEIGHT * h0;
+    tracing::info!(
+        "validate shear: biaxial, seed {seed}: {sample} grains, {:.1} x {:.1} D50, packing {packing:.3}, top at {:.1} mm/s",
+        w0 / d,
+        h0 / d,
+        1e3 * speed
+    );
+    let top = |st: &DemState<D2>| D2::to_array(plane_point(st, 1))[1];
+    let free = |st: &DemState<D2>| -> std::collections::HashMap<u64, [f64; 2]> {
+        let g = &st.grains;
+        (0..g.len())
+            .filter(|&i| !g.frozen[i] && g.id[i] < MEMBRANE)
+            .map(|i| {
+                let x = D2::to_array(g.x[i]);
+                (g.id[i], [x[0], x[1]])
+            })
+            .collect()
+    };
+    let mut records = Vec::new();
+    let (mut from, mut to) = (None, None);
+    let mut traction = Vec::new();
+    let mut axial = 0.0;
+    while axial < END {
+        if grains_service::signals::signalled() {
+            anyhow::bail!("stopped by a signal");
+        }
+        // The top comes up to speed over the first 0.1% of strain (as the calibration's).
+        let ramp = (axial / 0.001).clamp(0.05, 1.0);
+        state.walls[1].velocity = D2::from_array([0.0, -ramp * speed, 0.0]);
+        let mut load = 0.0;
+        for _ in 0..RECORD {
+            membrane.load(&mut state, dt);
+            pipe.run(&mut state, dt, 1);
+            load += state.walls[1].load[1].abs();
+        }
+        if let Some(id) = DemPipeline::first_non_finite(&state) {
+            anyhow::bail!("grain {id} is not finite: the biaxial test blew up at axial strain {axial:.4}");
+        }
+        let h = top(&state);
+        axial = 1.0 - h / h0;
+        let area = membrane.area(&state);
+        // The sample's width: the consolidated box's, changed as the chains' mean distance.
+        let width = w0 * (area / h) / (a0 / h0);
+        let sigma1 = load / RECORD as f64 / width;
+        records.push(Record {
+            axial,
+            volumetric: 1.0 - area / a0,
+            sin_phi: (sigma1 - PRESSURE) / (sigma1 + PRESSURE),
+        });
+        if from.is_none() && axial >= WINDOW.0 {
+            from = Some(free(&state));
+        }
+        if from.is_some() && to.is_none() {
+            traction.push(membrane.traction(&pipe, &state) / PRESSURE);
+        }
+        if to.is_none() && axial >= WINDOW.1 {
+            to = Some(free(&state));
+        }
+        if records.len() % 200 == 0 {
+            tracing::info!(
+                "validate shear: biaxial, seed {seed}: axial strain {axial:.4}, sin phi {:.3}, volumetric {:.4}",
+                records.last().map_or(0.0, |r| r.sin_phi),
+                records.last().map_or(0.0, |r| r.volumetric)
+            );
+        }
+    }
+    let (from, to) = (from.context("the window's start")?, to.context("the window's end")?);
+    let lateral = traction.iter().sum::<f64>() / traction.len() as f64;
+    let mut ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
+    ids.sort_unstable();
+    let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
+    let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
+    let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
+    let threshold = band::percentile(&strain, 0.98);
+    let found = band::measure(&x0, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
+    // The band's centre line: the principal axis of App. A's band grains (the least-squares
+    // line through them; the box's long side may lean from it), its inclination from the
+    // horizontal (the σ1 plane) in 0–90°.
+    let n = found.grains.len() as f64;
+    let c = found
+        .grains
+        .iter()
+        .fold([0.0, 0.0], |a, &i| [a[0] + x0[i][0] / n, a[1] + x0[i][1] / n]);
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for &i in &found.grains {
+        let (dx, dy) = (x0[i][0] - c[0], x0[i][1] - c[1]);
+        (sxx, syy, sxy) = (sxx + dx * dx, syy + dy * dy, sxy + dx * dy);
+    }
+    let axis = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let angle = axis.to_degrees().abs();
+    let angle = if angle > 90.0 { 180.0 - angle } else { angle };
+    // The incremental strain's profile across that line: slabs SLAB_D thick by the distance
+    // from it (shifted by the specimen's diagonal to be positive), and its width at half peak.
+    let normal = [-axis.sin(), axis.cos()];
+    let reach = w0.hypot(h0);
+    let across = x0
+        .iter()
+        .zip(&strain)
+        .map(|(p, &e)| ((p[0] - c[0]) * normal[0] + (p[1] - c[1]) * normal[1] + reach, e));
+    let profile = super::slab_profile(across, 2.0 * reach, d);
+    let fwhm = super::half_peak_width(&profile, super::SLAB_D);
+    let (peak, psi_peak) = peak_angles(&records);
+    let (phi, psi) = window_angles(&records);
+    Ok(BiaxialRun {
+        seed,
+        grains: sample,
+        width: w0,
+        height: h0,
+        packing,
+        records,
+        t_s: found.thickness / d,
+        fwhm,
+        angle,
+        counted: found.grains.len(),
+        x0,
+        band: found.grains,
+        peak,
+        psi_peak,
+        phi,
+        psi,
+        lateral,
+        wall: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// The dilatancy angle of the records in `from..=to` of axial strain: sin ψ = −Δε_v / (Δε_1 −
+/// Δε_3) in plane strain with ε_3 = ε_v − ε_1 (compression positive), from the volume's
+/// least-squares slope against the axial strain [°].
+fn dilatancy(records: &[Record], from: f64, to: f64) -> f64 {
+    let w: Vec<&Record> = records.iter().filter(|r| (from..=to).contains(&r.axial)).collect();
+    let n = w.len().max(1) as f64;
+    let (ma, mv) = (
+        w.iter().map(|r| r.axial).sum::<f64>() / n,
+        w.iter().map(|r| r.volumetric).sum::<f64>() / n,
+    );
+    let slope = w.iter().map(|r| (r.axial - ma) * (r.volumetric - mv)).sum::<f64>()
+        / w.iter().map(|r| (r.axial - ma).powi(2)).sum::<f64>().max(f64::MIN_POSITIVE);
+    // dε_v / dε_1 = slope; Δε_1 − Δε_3 = 2 Δε_1 − Δε_v.
+    (-slope / (2.0 - slope)).asin().to_degrees()
+}
+
+/// The peak of the mobilised friction, as a running mean over PEAK_SPAN of axial strain (a
+/// single record rattles by a few degrees), its axial strain and angle [°]; and the dilatancy
+/// angle over the PEAK_SPAN after it [°].
+fn peak_angles(records: &[Record]) -> ((f64, f64), f64) {
+    let mut best = (0.0, f64::MIN);
+    for (k, r) in records.iter().enumerate() {
+        let span: Vec<f64> = records[k..]
+            .iter()
+            .take_while(|q| q.axial <= r.axial + PEAK_SPAN)
+            .map(|q| q.sin_phi.asin().to_degrees())
+            .collect();
+        let mean = span.iter().sum::<f64>() / span.len() as f64;
+        if mean > best.1 {
+            best = (r.axial + 0.5 * PEAK_SPAN, mean);
+        }
+    }
+    (best, dilatancy(records, best.0, best.0 + PEAK_SPAN))
+}
+
+/// The mobilised friction angle (mean over the window) and the dilatancy angle over it [°].
+fn window_angles(records: &[Record]) -> (f64, f64) {
+    let w: Vec<&Record> = records.iter().filter(|r| (WINDOW.0..=WINDOW.1).contains(&r.axial)).collect();
+    let phi = w.iter().map(|r| r.sin_phi.asin().to_degrees()).sum::<f64>() / w.len().max(1) as f64;
+    (phi, dilatancy(records, WINDOW.0, WINDOW.1))
+}
+
+/// Chen 2021 §6.2 as a DEM: the band's thickness against the paper's, its inclination
+/// between Roscoe's and Coulomb's, the stress and volume against the axial strain.
+pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Result<Part> {
+    let mut part = Part::default();
+    let mut md = String::from("## Biaxial compression (Chen 2021 §6.2)\n\n");
+    let path = args.scenes.join(SCENE);
+    let scene = grains_protocol::scene::load(&path).with_context(|| format!("loading {}", path.display()))?;
+    let material = scene.bodies[0].material;
+    let d = 2.0 * scene.materials[material].dem.as_ref().context("a DEM material")?.radius;
+    let runs: Vec<BiaxialRun> = SEEDS
+        .iter()
+        .map(|&seed| run(&scene, material, seed))
+        .collect::<anyhow::Result<_>>()?;
+    let r = &runs[0];
+    let _ = writeln!(
+        &mut md,
+        "### DEM\n\nChen 2021 Table 5 in D50: {} grains of `{SCENE}`, {:.1} × {:.1} D50 after \
+         consolidation at {PRESSURE:.0} Pa with μ = 0.01 (packing {:.3}; seed {}), then shortened with μ = {} at {:.1}% of its \
+         height a second (Chen's 2 cm/s) to {:.2}% of axial strain, the sides held at {PRESSURE:.0} Pa by a membrane of \
+         nodes {NODE_SPACING_D} D50 apart (App. B: k_ms = {K_MS:.0} N/m, γ_ms = {GAMMA_MS} N s/m), the bottom no-slip \
+         (grains within {GLUE_D} D50 glued), the top frictionless. Band (App. A) over axial strain {:.1}–{:.1}% (Fig. 18), \
+         its inclination the least-squares line through App. A's grains; the profile of the incremental strain across that \
+         line in {}-D50 slabs. One run per seed (the samples differ in their lattice's jitter and radii).\n\n\
+         | seed | t_s (App. A) | profile across the band at half peak | grains counted | band's inclination from horizontal | peak φ (axial strain), ψ after it | φ, ψ over the window | the membrane's traction over the window / p | wall |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        r.grains,
+        r.width / d,
+        r.height / d,
+        r.packing,
+        r.seed,
+        scene.materials[material].dem.as_ref().map_or(0.0, |m| m.friction),
+        100.0 * SPEED_OVER_HEIGHT,
+        100.0 * END,
+        100.0 * WINDOW.0,
+        100.0 * WINDOW.1,
+        super::SLAB_D,
+    );
+    for r in &runs {
+        let _ = writeln!(
+            &mut md,
+            "| {} | {:.1} D50 | {:.0} D50 | {} | {:.1}° | {:.2}° ({:.2}%), {:.2}° | {:.2}°, {:.2}° | {:.4} | {:.0} s |",
+            r.seed,
+            r.t_s,
+            r.fwhm,
+            r.counted,
+            r.angle,
+            r.peak.1,
+            100.0 * r.peak.0,
+            r.psi_peak,
+            r.phi,
+            r.psi,
+            r.lateral,
+            r.wall
+        );
+    }
+    let _ = writeln!(
+        &mut md,
+        "\nPaper: t_s = {PAPER_BAND} D50 for the DEM and the hybrid, 7 D50 for the continuum (Fig. 18).\n"
+    );
+    let list = |f: &dyn Fn(&BiaxialRun) -> String| runs.iter().map(f).collect::<Vec<_>>().join(", ");
+    let t_s = runs.iter().map(|r| r.t_s).sum::<f64>() / runs.len() as f64;
+    part.check(
+        "biaxial (DEM): band thickness",
+        format!("Chen 2021 Fig. 18: {PAPER_BAND} D50 (DEM and hybrid)"),
+        format!(
+            "{t_s:.1} D50, the mean of {} seeds ({}; the profiles across them at half peak: {} D50)",
+            runs.len(),
+            list(&|r| format!("{:.1}", r.t_s)),
+            list(&|r| format!("{:.0}", r.fwhm))
+        ),
+        format!("±{BAND_TOLERANCE} D50"),
+        (t_s - PAPER_BAND).abs() <= BAND_TOLERANCE,
+    );
+    // The band forms at the peak: its angles are the peak's (Vermeer 1990's bifurcation).
+    let range = |r: &BiaxialRun| (45.0 + 0.5 * r.psi_peak, 45.0 + 0.5 * r.peak.1);
+    part.check(
+        "biaxial (DEM): the band's inclination",
+        "between Roscoe's 45° + ψ/2 and Coulomb's 45° + φ/2 (Vardoulakis 1980; Vermeer 1990), φ and ψ at each run's peak",
+        list(&|r| {
+            let (roscoe, coulomb) = range(r);
+            format!("{:.1}° (Roscoe {roscoe:.1}°, Coulomb {coulomb:.1}°)", r.angle)
+        }),
+        "within 3° of that range on every seed",
+        runs.iter().all(|r| {
+            let (roscoe, coulomb) = range(r);
+            r.angle >= roscoe - 3.0 && r.angle <= coulomb + 3.0
+        }),
+    );
+    part.check(
+        "biaxial (DEM): the membrane holds the confining pressure",
+        "App. B: σ3 = p on the grains",
+        format!(
+            "the grains' contacts with the membrane carry {} p over the window",
+            list(&|r| format!("{:.4}", r.lateral))
+        ),
+        "within 2% on every seed",
+        runs.iter().all(|r| (r.lateral - 1.0).abs() <= 0.02),
+    );
+    let curve = |f: fn(&Record) -> f64| {
+        runs.iter()
+            .map(|r| {
+                Series::new(
+                    format!("DEM, seed {}", r.seed),
+                    Kind::Line,
+                    r.records.iter().map(|x| (100.0 * x.axial, f(x))).collect(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    for (stem, caption, y_label, points) in [
+        (
+            "shear_biaxial_friction",
+            "Biaxial compression (DEM): the mobilised friction against the axial strain (Chen Fig. 17, left)",
+            "phi = asin((s1 - s3) / (s1 + s3)) [deg]",
+            curve(|x| x.sin_phi.asin().to_degrees()),
+        ),
+        (
+            "shear_biaxial_volume",
+            "Biaxial compression (DEM): the volumetric strain against the axial strain (Chen Fig. 17, middle)",
+            "volumetric strain [%] (compression +)",
+            curve(|x| 100.0 * x.volumetric),
+        ),
+    ] {
+        let chart = Chart {
+            title: caption.into(),
+            x_label: "axial strain [%]".into(),
+            y_label: y_label.into(),
+            series: points,
+            ..Chart::default()
+        };
+        part.chart(&args.out, stem, caption, &chart)?;
+    }
+    for r in &runs {
+        let hot: Vec<(f64, f64)> = r.band.iter().map(|&i| (r.x0[i][0] / d, r.x0[i][1] / d)).collect();
+        let all: Vec<(f64, f64)> = r.x0.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
+        let chart = Chart {
+            title: format!("Biaxial compression (DEM, seed {}): the band's grains (App. A)", r.seed),
+            x_label: "x [D50]".into(),
+            y_label: "y [D50]".into(),
+            series: vec![
+                Series::new("a quarter of the grains", Kind::Points, all),
+                Series::new("band grains", Kind::Points, hot),
+            ],
+            ..Chart::default()
+        };
+        part.chart(
+            &args.out,
+            &format!("shear_biaxial_band_s{}", r.seed),
+            format!(
+                "Biaxial compression (DEM, seed {}): the grains App. A counts in the band, where they were at {:.1}% of axial strain",
+                r.seed,
+                100.0 * WINDOW.0
+            ),
+            &chart,
+        )?;
+    }
+    part.md = md;
+    Ok(part)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::box_stresses;
+
+    /// App. B's membrane holds a sample at its pressure: a 400-grain box consolidated at p,
+    /// its side walls replaced by membranes at p and its top platen held, passes p to the
+    /// grains (its traction, and their lateral stress by Love–Weber within 5%: 0.967 p, the
+    /// estimator's own error at the boundary), keeps its area, and no grain gets out between
+    /// the nodes. (The vertical stress is not p: at a fixed height a frictional packing may keep
+    /// less; it settles at 0.92 p here.) With the membrane's pressure at zero the sample
+    /// springs out and σxx falls: the test fails then.
+    #[test]
+    fn a_membrane_holds_the_sample_at_its_pressure() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(SCENE);
+        let scene = grains_protocol::scene::load(&path).unwrap();
+        let mat = &scene.materials[scene.bodies[0].material];
+        let d = 2.0 * mat.dem.as_ref().unwrap().radius;
+        let spacing = crate::calibrate::shear::ShearCell::spacing(mat.dem.as_ref().unwrap());
+        let width = 16.0 * spacing;
+        let mut state = box_sample(mat, width, 1.5 * width, 3).unwrap();
+        let (dt, ..) = grains_dem_service::setup::stable_step(&scene).unwrap();
+        let mut pipe = DemPipeline::<D2>::new(1).unwrap();
+        let rate = 1e-3 * (PRESSURE / mat.density).sqrt() / d;
+        let (w0, h0) = consolidate_box(&mut state, &mut pipe, dt, PRESSURE, rate).unwrap();
+        let (sxx, syy, ..) = box_stresses(&mut state, &mut pipe, dt, 200);
+        assert!(
+            (sxx / PRESSURE - 1.0).abs() < 0.03 && (syy / PRESSURE - 1.0).abs() < 0.03,
+            "{sxx} {syy}"
+        );
+        let membrane = Membrane::wrap(&mut state, PRESSURE, d, mat.density);
+        pipe.invalidate();
+        let run = |state: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, steps: usize| {
+            let mut load = 0.0;
+            for _ in 0..steps {
+                membrane.load(state, dt);
+                pipe.run(state, dt, 1);
+                load += state.walls[1].load[1].abs();
+            }
+            (load / steps as f64, membrane.area(state))
+        };
+        let (_, a0) = run(&mut state, &mut pipe, SETTLE);
+        let (load, area) = run(&mut state, &mut pipe, 4000);
+        let width = w0 * area / a0;
+        let syy = load / width;
+        let s = crate::calibrate::shear::love_weber(&pipe, &state, width * h0);
+        let traction = membrane.traction(&pipe, &state);
+        eprintln!(
+            "membrane: width {w0:.6} -> {width:.6} m, σyy on the platen {syy:.1} Pa, traction {traction:.1} Pa, the grains' σxx {:.1} σyy {:.1} Pa (Love–Weber)",
+            s[0], s[1]
+        );
+        assert!(
+            (traction / PRESSURE - 1.0).abs() < 0.02,
+            "the membrane's traction is {traction:.1} Pa"
+        );
+        // No grain gets out between the nodes.
+        let g = &state.grains;
+        let node_x = |side: usize| membrane.chains[side].iter().map(|&id| g.x[g.index_of(id).unwrap()].x);
+        let (left, right) = (node_x(0).fold(f64::MAX, f64::min), node_x(1).fold(f64::MIN, f64::max));
+        assert!(
+            (0..g.len())
+                .filter(|&i| g.id[i] < MEMBRANE)
+                .all(|i| (left..=right).contains(&g.x[i].x)),
+            "a grain got out"
+        );
+        assert!((s[0] / PRESSURE - 1.0).abs() < 0.05, "the grains' σxx is {:.1} Pa", s[0]);
+        assert!(
+            (area / a0 - 1.0).abs() < 0.005,
+            "the area moved by {:.3}%",
+            100.0 * (area / a0 - 1.0)
+        );
+    }
+}
