@@ -25,6 +25,7 @@ use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::{D2, Space};
 use grains_dem::state::{DemState, Grains};
 use grains_oracle::band;
+use std::collections::HashMap;
 use std::fmt::Write as _;
 
 /// Chen's Table 5 in D50, and its 100 kPa over a 1-cm-thick disk as a stress over a
@@ -349,32 +350,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
     let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
     let threshold = band::percentile(&strain, 0.98);
     let found = band::measure(&x0, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
-    // The band's centre line: the principal axis of App. A's band grains (the least-squares
-    // line through them; the box's long side may lean from it), its inclination from the
-    // horizontal (the σ1 plane) in 0–90°.
-    let n = found.grains.len() as f64;
-    let c = found
-        .grains
-        .iter()
-        .fold([0.0, 0.0], |a, &i| [a[0] + x0[i][0] / n, a[1] + x0[i][1] / n]);
-    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
-    for &i in &found.grains {
-        let (dx, dy) = (x0[i][0] - c[0], x0[i][1] - c[1]);
-        (sxx, syy, sxy) = (sxx + dx * dx, syy + dy * dy, sxy + dx * dy);
-    }
-    let axis = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let angle = axis.to_degrees().abs();
-    let angle = if angle > 90.0 { 180.0 - angle } else { angle };
-    // The incremental strain's profile across that line: slabs SLAB_D thick by the distance
-    // from it (shifted by the specimen's diagonal to be positive), and its width at half peak.
-    let normal = [-axis.sin(), axis.cos()];
-    let reach = w0.hypot(h0);
-    let across = x0
-        .iter()
-        .zip(&strain)
-        .map(|(p, &e)| ((p[0] - c[0]) * normal[0] + (p[1] - c[1]) * normal[1] + reach, e));
-    let profile = super::slab_profile(across, 2.0 * reach, d);
-    let fwhm = super::half_peak_width(&profile, super::SLAB_D);
+    let (angle, fwhm) = band_line(&x0, &strain, &found.grains, d, w0.hypot(h0));
     let (peak, psi_peak) = peak_angles(&records);
     let (phi, psi) = window_angles(&records);
     Ok(BiaxialRun {
@@ -397,6 +373,31 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
         lateral,
         wall: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// The band's centre line, the principal axis of the band's members `band` among the
+/// positions `x0` (the least-squares line through them; App. A's box may lean from it): its
+/// inclination from the horizontal (the σ1 plane) in 0–90° [°], and the width at half peak
+/// [D50] of the incremental `strain`'s profile across it (slabs SLAB_D thick by the distance
+/// from it, shifted by `reach`, at least the specimen's diagonal, to be positive).
+fn band_line(x0: &[[f64; 2]], strain: &[f64], band: &[usize], d: f64, reach: f64) -> (f64, f64) {
+    let n = band.len() as f64;
+    let c = band.iter().fold([0.0, 0.0], |a, &i| [a[0] + x0[i][0] / n, a[1] + x0[i][1] / n]);
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for &i in band {
+        let (dx, dy) = (x0[i][0] - c[0], x0[i][1] - c[1]);
+        (sxx, syy, sxy) = (sxx + dx * dx, syy + dy * dy, sxy + dx * dy);
+    }
+    let axis = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let angle = axis.to_degrees().abs();
+    let angle = if angle > 90.0 { 180.0 - angle } else { angle };
+    let normal = [-axis.sin(), axis.cos()];
+    let across = x0
+        .iter()
+        .zip(strain)
+        .map(|(p, &e)| ((p[0] - c[0]) * normal[0] + (p[1] - c[1]) * normal[1] + reach, e));
+    let profile = super::slab_profile(across, 2.0 * reach, d);
+    (angle, super::half_peak_width(&profile, super::SLAB_D))
 }
 
 /// The dilatancy angle of the records in `from..=to` of axial strain: sin ψ = −Δε_v / (Δε_1 −
@@ -597,8 +598,411 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
             &chart,
         )?;
     }
+    if let Err(e) = continuum(&scene, material, &runs, args, &mut part, &mut md) {
+        tracing::error!("validate biaxial: the continuum failed: {e:#}");
+        let _ = writeln!(md, "### Continuum\n\nDid not finish: {e:#}\n");
+        part.check(
+            "biaxial (continuum) ran to its end",
+            "every run completes",
+            format!("{e:#}"),
+            "no error",
+            false,
+        );
+    }
     part.md = md;
     Ok(part)
+}
+
+/// The continuum biaxial on two grids (Chen Fig. 18, right, and App. C): the critical-state
+/// model calibrated as the planar shear's, at this test's pressure; its band against the
+/// DEM's and the cell, and the oracle's detection.
+fn continuum(
+    scene: &grains_protocol::scene::Scene,
+    material: usize,
+    dems: &[BiaxialRun],
+    args: &super::ValidateArgs,
+    part: &mut Part,
+    md: &mut String,
+) -> anyhow::Result<()> {
+    use super::continuum::{CALIBRATION_GRAINS, PROBE_SEED, probed_moduli};
+    let dem = &dems[0];
+    let d = 2.0 * scene.materials[material].dem.as_ref().context("a DEM material")?.radius;
+    let t0 = std::time::Instant::now();
+    let cal = crate::calibrate::shear::simple_shear(scene, material, CALIBRATION_GRAINS, PRESSURE, &[1e-3], 1.0, 1)?;
+    let fit = crate::calibrate::shear::critical_state(&cal.transient)
+        .context("the calibration's simple shear has no peak above its critical state")?;
+    let (bulk, shear) = probed_moduli(scene, material, CALIBRATION_GRAINS, 40.0, PRESSURE, PROBE_SEED)?;
+    let calibration_wall = t0.elapsed().as_secs_f64();
+    let model = grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState {
+        bulk,
+        shear,
+        tan_friction_cs: fit.friction_angle.to_radians().tan(),
+        packing_cs: fit.packing_critical,
+        chi: fit.chi,
+        xi: fit.xi,
+        cohesion: 0.0,
+    };
+    let runs: Vec<ContinuumBiaxial> = CELLS_D
+        .iter()
+        .map(|&c| continuum_run(dem, &model, scene.materials[material].density, d, c))
+        .collect::<anyhow::Result<_>>()?;
+    let _ = writeln!(
+        md,
+        "### Continuum\n\nSeed {}'s specimen as Chen's critical-state continuum, calibrated as the planar shear's at this \
+         test's {PRESSURE:.0} Pa ({CALIBRATION_GRAINS}-grain simple shear to strain 1 at I = 1e-3, small-strain probes of \
+         another cell; {calibration_wall:.0} s): φ_cs = {:.2}°, Φ_cs = {:.4}, χ = {:.2}, ξ = {:.1}, K = {:.3e} Pa, G = {:.3e} \
+         Pa; the points at the DEM sample's packing {:.3}, one cell at the right face a quarter of the way up at Φ_cs \
+         (Chen's weak elements); σ3 as dead loads on the side columns of points; the bottom nodes fixed, the top nodes \
+         driven down at the DEM's speed and free sideways; the oracle with Table 6's coefficients. The band as the DEM's, on \
+         the points' plastic strain grown over the window.\n\n\
+         | cell | points | t_s (App. A) | profile across the band at half peak | inclination | oracle fires at axial strain (cells flagged) | peak φ (axial strain), ψ after it | φ, ψ over the window | wall |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        dem.seed, fit.friction_angle, fit.packing_critical, fit.chi, fit.xi, bulk, shear, dem.packing,
+    );
+    for r in &runs {
+        let (peak, psi_peak) = peak_angles(&r.records);
+        let (phi, psi) = window_angles(&r.records);
+        let _ = writeln!(
+            md,
+            "| {:.0} D50 | {} | {:.1} D50 | {:.0} D50 | {:.1}° | {} | {:.2}° ({:.2}%), {:.2}° | {:.2}°, {:.2}° | {:.0} s |",
+            r.cell / d,
+            r.points,
+            r.t_s,
+            r.fwhm,
+            r.angle,
+            r.detected.map_or("never".into(), |(e, c, y)| format!(
+                "{:.2}% ({c}, mean height {y:.0} D50)",
+                100.0 * e
+            )),
+            peak.1,
+            100.0 * peak.0,
+            psi_peak,
+            phi,
+            psi,
+            r.wall
+        );
+    }
+    let _ = writeln!(md);
+    let dem_fwhm = dem.fwhm;
+    let (fine, coarse) = (&runs[0], &runs[1]);
+    // A band through the specimen, not along the platen or the floor.
+    let through = |r: &ContinuumBiaxial| (30.0..=70.0).contains(&r.angle);
+    part.check(
+        "biaxial (continuum): the band crosses the specimen",
+        "Chen 2021 Fig. 18: an inclined band from the weak elements",
+        runs.iter()
+            .map(|r| format!("{:.1}° on {:.0}-D50 cells", r.angle, r.cell / d))
+            .collect::<Vec<_>>()
+            .join(", "),
+        "its line 30–70° from the horizontal on both grids",
+        runs.iter().all(through),
+    );
+    part.check(
+        "biaxial (continuum): the band follows the cell, not the grain",
+        format!(
+            "Chen 2021 Fig. 18 and App. C: the continuum's band 7 D50, thinner than the DEM's; seed {}'s DEM {dem_fwhm:.0} D50 (half peak)",
+            dem.seed
+        ),
+        format!(
+            "{:.0} D50 on {:.0}-D50 cells, {:.0} D50 on {:.0}-D50 cells (half peak)",
+            fine.fwhm,
+            fine.cell / d,
+            coarse.fwhm,
+            coarse.cell / d
+        ),
+        "thinner than the DEM's on both, thicker on the coarser grid, both bands crossing the specimen",
+        runs.iter().all(through) && fine.fwhm < dem_fwhm && coarse.fwhm < dem_fwhm && coarse.fwhm > fine.fwhm,
+    );
+    for r in &runs {
+        let cells = r.cell / d;
+        let inside = |y: f64| y > 2.0 * cells && y < dem.height / d - 2.0 * cells;
+        part.check(
+            format!("biaxial (continuum, {cells:.0}-D50 cells): the oracle finds the band"),
+            "Chen 2021 Alg. 1, Table 6: detected in the specimen before the band is measured",
+            r.detected.map_or("never".into(), |(e, c, y)| {
+                format!("at axial strain {:.2}%, {c} cells at {y:.0} D50 mean height", 100.0 * e)
+            }),
+            format!(
+                "fires before {:.1}% of axial strain, the cells' mean more than two cells from the platens",
+                100.0 * WINDOW.0
+            ),
+            r.detected.is_some_and(|(e, _, y)| e < WINDOW.0 && inside(y)),
+        );
+    }
+    for r in &runs {
+        let hot: Vec<(f64, f64)> = r.band.iter().map(|&i| (r.x0[i][0] / d, r.x0[i][1] / d)).collect();
+        let all: Vec<(f64, f64)> = r.x0.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
+        let cells = r.cell / d;
+        let chart = Chart {
+            title: format!("Biaxial compression (continuum, {cells:.0}-D50 cells): the band's points (App. A)"),
+            x_label: "x [D50]".into(),
+            y_label: "y [D50]".into(),
+            series: vec![
+                Series::new("a quarter of the points", Kind::Points, all),
+                Series::new("band points", Kind::Points, hot),
+            ],
+            ..Chart::default()
+        };
+        part.chart(
+            &args.out,
+            &format!("shear_biaxial_band_continuum_{cells:.0}d"),
+            format!("Biaxial compression (continuum, {cells:.0}-D50 cells): the points App. A counts in the band"),
+            &chart,
+        )?;
+    }
+    for (stem, caption, y_label, f) in [
+        (
+            "shear_biaxial_friction_continuum",
+            "Biaxial compression: the mobilised friction against the axial strain, DEM and continuum",
+            "phi = asin((s1 - s3) / (s1 + s3)) [deg]",
+            (|x: &Record| x.sin_phi.asin().to_degrees()) as fn(&Record) -> f64,
+        ),
+        (
+            "shear_biaxial_volume_continuum",
+            "Biaxial compression: the volumetric strain against the axial strain, DEM and continuum",
+            "volumetric strain [%] (compression +)",
+            |x: &Record| 100.0 * x.volumetric,
+        ),
+    ] {
+        let line =
+            |name: String, records: &[Record]| Series::new(name, Kind::Line, records.iter().map(|x| (100.0 * x.axial, f(x))).collect());
+        let chart = Chart {
+            title: caption.into(),
+            x_label: "axial strain [%]".into(),
+            y_label: y_label.into(),
+            series: std::iter::once(line(format!("DEM, seed {}", dem.seed), &dem.records))
+                .chain(
+                    runs.iter()
+                        .map(|r| line(format!("continuum, {:.0}-D50 cells", r.cell / d), &r.records)),
+                )
+                .collect(),
+            ..Chart::default()
+        };
+        part.chart(&args.out, stem, caption, &chart)?;
+    }
+    Ok(())
+}
+
+/// Continuum cells of the biaxial compression [D50] (the planar shear's two grids).
+const CELLS_D: [f64; 2] = [2.0, 4.0];
+
+/// One continuum biaxial compression (Chen Fig. 18, right).
+struct ContinuumBiaxial {
+    cell: f64,
+    points: usize,
+    /// App. A on the points' incremental plastic strain over the window [D50], the profile
+    /// across the band's line at half peak [D50], the line's inclination [°].
+    t_s: f64,
+    fwhm: f64,
+    angle: f64,
+    /// The axial strain when Alg. 1 first fired, the cells it flagged then and their mean
+    /// height [D50].
+    detected: Option<(f64, usize, f64)>,
+    /// The points' positions at the window's start and App. A's band among them.
+    x0: Vec<[f64; 2]>,
+    band: Vec<usize>,
+    records: Vec<Record>,
+    wall: f64,
+}
+
+/// The biaxial compression of `dem`'s specimen as Chen's critical-state continuum `model`
+/// on cells of `cell_d` D50 (two points per cell and axis, APIC): σ3 = p as dead loads on the
+/// points of the side columns (`grains_mpm::points::confine`), the bottom nodes fixed, the top
+/// nodes driven down at the DEM's speed and free sideways, weak points (at Φ_cs) in one cell
+/// at the right face a quarter of the way up (Chen: "the right lower part"), the oracle (Alg.
+/// 1, Table 6) every ORACLE_EVERY steps.
+fn continuum_run(
+    dem: &BiaxialRun,
+    model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
+    grain_density: f64,
+    d: f64,
+    cell_d: f64,
+) -> anyhow::Result<ContinuumBiaxial> {
+    use super::continuum::ORACLE_EVERY;
+    use grains_grid::{Grid, Kernel};
+    use grains_mpm::boundary::Contact;
+    use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
+    use grains_mpm::points::{Points, confine};
+    use grains_oracle::shear_band::{self as oracle, Coefficients, Persistence, RecentStrain};
+    let t0 = std::time::Instant::now();
+    let (w, height) = (dem.width, dem.height);
+    let nx = (w / (cell_d * d)).round().max(4.0) as u64;
+    let h = w / nx as f64;
+    let spacing = 0.5 * h;
+    // Room on both sides for the bulge, three wall layers under y = 0 (the fixed bottom).
+    let margin = (0.25 * w / h).ceil() as u64;
+    let ny = (height / h).ceil() as u64 + 4;
+    let grid = Grid {
+        origin: [-(margin as f64) * h, -2.0 * h, 0.0],
+        h,
+        nodes: [nx + 2 * margin + 1, ny + 3, 1],
+        period: [0, 0, 0],
+    };
+    let rho = grain_density * dem.packing;
+    let shear_modulus = model.shear;
+    let model = Model::CriticalState(*model);
+    let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, h, 2);
+    let params = MpmParams::<D2> {
+        grid,
+        kernel: Kernel::Gimp { half_width: 0.5 * spacing },
+        model,
+        gravity: D2::from_array([0.0; 3]),
+        transfer: Transfer::Apic,
+        domain_walls: Some(Contact::Sticky),
+        walls: Vec::new(),
+        loads_at_nodes: false,
+    };
+    let packing_cs = match params.model {
+        Model::CriticalState(m) => m.packing_cs,
+        _ => unreachable!("built above"),
+    };
+    let mut pts = Points::<D2>::default();
+    let (cols, rows) = ((w / spacing).round() as usize, (height / spacing).round() as usize);
+    for j in 0..rows {
+        for i in 0..cols {
+            let x = [(i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing];
+            let weak = x[0] > w - h && (x[1] - 0.25 * height).abs() < 0.5 * h;
+            pts.push(
+                D2::from_array([x[0], x[1], 0.0]),
+                rho * spacing * spacing,
+                spacing * spacing,
+                if weak { packing_cs } else { dem.packing },
+            );
+        }
+    }
+    let n = pts.len();
+    confine(&mut pts, 0..n, [0.0, -1e9, 0.0], [w, 1e9, 0.0], spacing, PRESSURE);
+    {
+        // Consolidated at p, as the grains: Hencky's b^e = e^(−p/K) I, τ = −p I.
+        use grains_mpm::matrix::Matrix;
+        let identity = <<D2 as grains_mpm::matrix::MpmSpace>::M as Matrix>::identity();
+        let bulk = match params.model {
+            Model::CriticalState(m) => m.bulk,
+            _ => unreachable!("built above"),
+        };
+        for k in 0..n {
+            pts.b_e[k] = identity * (-PRESSURE / bulk).exp();
+            pts.tau[k] = identity * -PRESSURE;
+        }
+    }
+    let mut pipe = MpmPipeline::<D2>::new(2).map_err(|e| anyhow::anyhow!(e))?;
+    let cells = Grid {
+        nodes: [grid.nodes[0] - 1, grid.nodes[1] - 1, 1],
+        ..grid
+    };
+    let coefficients = Coefficients::BIAXIAL;
+    let (mut recent, mut persistence) = (RecentStrain::default(), Persistence::default());
+    let mut detected = None;
+    let settle = (0.05 / dt).ceil() as usize;
+    // The top comes up to speed over three shear-wave transits (the planar shear's ramp).
+    let speed = SPEED_OVER_HEIGHT * height;
+    let ramp = 3.0 * height / (shear_modulus / rho).sqrt();
+    // The points' positions and plastic strain at the window's start, by id; their plastic
+    // strain at its end.
+    let mut from: Option<HashMap<u64, ([f64; 2], f64)>> = None;
+    let mut to: Option<HashMap<u64, f64>> = None;
+    let mut records = Vec::new();
+    let (mut travel, mut v0) = (0.0, None);
+    for step in 0.. {
+        if grains_service::signals::signalled() {
+            anyhow::bail!("stopped by a signal");
+        }
+        let axial = travel / height;
+        if axial >= END {
+            break;
+        }
+        let pressing = step >= settle;
+        if pressing && from.is_none() && axial >= WINDOW.0 {
+            from = Some(
+                (0..n)
+                    .map(|k| (pts.id[k], ([pts.x[k].x, pts.x[k].y], pts.plastic_strain[k])))
+                    .collect(),
+            );
+        }
+        if pressing && to.is_none() && axial >= WINDOW.1 {
+            to = Some((0..n).map(|k| (pts.id[k], pts.plastic_strain[k])).collect());
+        }
+        pipe.phase1(&pts, &params, dt)
+            .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
+        let top = pts.x.iter().map(|x| x.y).fold(f64::NEG_INFINITY, f64::max);
+        let vy = if pressing {
+            -speed * ((step + 1 - settle) as f64 * dt / ramp).min(1.0)
+        } else {
+            0.0
+        };
+        travel -= vy * dt;
+        pipe.for_each_node_mut(|ijk, _, v| {
+            if params.grid.origin[1] + ijk[1] as f64 * h >= top {
+                v.y = vy;
+            }
+        });
+        pipe.phase2(&mut pts, &params, dt)
+            .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
+        if !pressing || !(step - settle).is_multiple_of(ORACLE_EVERY) {
+            continue;
+        }
+        let t = step as f64 * dt;
+        if detected.is_none() {
+            let max_rate = pts.plastic_rate.iter().copied().fold(0.0, f64::max);
+            let (tau_l, tau_g) = (oracle::window(coefficients.cl, max_rate), oracle::window(coefficients.cg, max_rate));
+            let recent_strain = recent.recent(t, tau_l, &pts.id, &pts.plastic_strain);
+            recent.record(t, &pts.id, &pts.plastic_strain);
+            let at = |k: usize| D2::to_array(pts.x[k]);
+            let rate = oracle::cell_average(&cells, 2, (0..n).map(|k| (at(k), pts.mass[k], pts.plastic_rate[k])));
+            let recent_cells = oracle::cell_average(&cells, 2, (0..n).map(|k| (at(k), pts.mass[k], recent_strain[k])));
+            let flagged = oracle::flag(&cells, 2, &rate, &recent_cells, d, &coefficients);
+            if persistence.update(t, flagged, tau_g) {
+                let ys: Vec<f64> = persistence
+                    .flagged()
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, f)| **f)
+                    .map(|(i, _)| cells.origin[1] + ((i / cells.nodes[0] as usize) as f64 + 0.5) * h)
+                    .collect();
+                let mean = ys.iter().sum::<f64>() / ys.len() as f64;
+                detected = Some((axial, ys.len(), mean / d));
+                tracing::info!(
+                    "validate biaxial: continuum on {cell_d}-D50 cells: the oracle fires at axial strain {axial:.4}, {} cells, mean height {:.1} D50",
+                    ys.len(),
+                    mean / d
+                );
+            }
+        }
+        if (step - settle).is_multiple_of(5 * ORACLE_EVERY) {
+            let (mut sxx, mut syy, mut vol) = (0.0, 0.0, 0.0);
+            for k in 0..n {
+                sxx -= pts.tau[k].x_axis.x * pts.volume[k];
+                syy -= pts.tau[k].y_axis.y * pts.volume[k];
+                vol += pts.jacobian[k] * pts.volume[k];
+            }
+            let v0 = *v0.get_or_insert(vol);
+            records.push(Record {
+                axial,
+                volumetric: 1.0 - vol / v0,
+                sin_phi: (syy - sxx) / (syy + sxx),
+            });
+        }
+    }
+    let (from, to) = (from.context("the window's start")?, to.context("the window's end")?);
+    let mut ids: Vec<u64> = from.keys().copied().collect();
+    ids.sort_unstable();
+    let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id].0).collect();
+    let strain: Vec<f64> = ids.iter().map(|id| to[id] - from[id].1).collect();
+    let threshold = band::percentile(&strain, 0.98);
+    let found = band::measure(&x0, &strain, threshold, spacing).context("no band in the continuum")?;
+    let (angle, fwhm) = band_line(&x0, &strain, &found.grains, d, w.hypot(height));
+    Ok(ContinuumBiaxial {
+        cell: h,
+        points: n,
+        t_s: found.thickness / d,
+        fwhm,
+        angle,
+        detected,
+        band: found.grains,
+        x0,
+        records,
+        wall: t0.elapsed().as_secs_f64(),
+    })
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ const CELLS_D: [f64; 2] = [2.0, 4.0];
 pub(super) const ORACLE_EVERY: usize = 10;
 /// Grains of the simple-shear cell the continuum is calibrated on (`grains calibrate --shear`'s
 /// cell, a different sample and test from the planar shear).
-const CALIBRATION_GRAINS: usize = 2400;
+pub(super) const CALIBRATION_GRAINS: usize = 2400;
 /// The seed of the cell the continuum's elastic moduli are probed on (the calibration's is 1).
 pub(super) const PROBE_SEED: u64 = 2;
 
@@ -82,7 +82,7 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dems: &[DemShear], par
     let calibration_wall = t0.elapsed().as_secs_f64();
     // The elastic moduli from the DEM at the same pressure (Chen §2.2): small-strain probes of
     // a third cell, prepared as the planar shear's.
-    let (bulk, shear) = probed_moduli(&scene, material, CALIBRATION_GRAINS, 40.0, PROBE_SEED)?;
+    let (bulk, shear) = probed_moduli(&scene, material, CALIBRATION_GRAINS, 40.0, PRESSURE, PROBE_SEED)?;
     let model = grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState {
         bulk,
         shear,
@@ -537,17 +537,18 @@ pub(super) fn continuum_run(
 }
 
 /// The small-strain moduli (K, G) of a cell of `grains` grains `width_d` D50 wide, prepared as
-/// the planar shear's (consolidated at its pressure with μ = 0.01, then μ restored).
+/// the planar shear's (consolidated at `pressure` [Pa] with μ = 0.01, then μ restored).
 pub(super) fn probed_moduli(
     scene: &grains_protocol::scene::Scene,
     material: usize,
     grains: usize,
     width_d: f64,
+    pressure: f64,
     seed: u64,
 ) -> anyhow::Result<(f64, f64)> {
     let dem = scene.materials[material].dem.as_ref().context("a DEM material")?;
     let cols = (width_d * 2.0 * dem.radius / ShearCell::spacing(dem)).round() as usize;
-    let mut cell = ShearCell::new(scene, material, grains, cols, PRESSURE, seed, 2)?;
+    let mut cell = ShearCell::new(scene, material, grains, cols, pressure, seed, 2)?;
     cell.state.params.materials[0].friction = 0.01;
     cell.consolidate().context("consolidating the moduli's probe cell")?;
     cell.state.params.materials[0].friction = dem.friction;

@@ -315,7 +315,7 @@ mod tests {
         let untrained = cell.stress();
         let packing = cell.packing();
 
-        let (bulk, shear) = probed_moduli(&scene, material, 600, 20.0, PROBE_SEED).unwrap();
+        let (bulk, shear) = probed_moduli(&scene, material, 600, 20.0, PRESSURE, PROBE_SEED).unwrap();
         let model = HenckyCriticalState {
             bulk,
             shear,
