@@ -820,7 +820,7 @@ fn continuum_run(
 ) -> anyhow::Result<ContinuumBiaxial> {
     use super::continuum::ORACLE_EVERY;
     use grains_grid::{Grid, Kernel};
-    use grains_mpm::boundary::Contact;
+    use grains_mpm::boundary::{Contact, Geometry, Wall};
     use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
     use grains_mpm::points::{Points, confine};
     use grains_oracle::shear_band::{self as oracle, Coefficients, Persistence, RecentStrain};
@@ -842,14 +842,23 @@ fn continuum_run(
     let shear_modulus = model.shear;
     let model = Model::CriticalState(*model);
     let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, h, 2);
-    let params = MpmParams::<D2> {
+    let mut params = MpmParams::<D2> {
         grid,
         kernel: Kernel::Gimp { half_width: 0.5 * spacing },
         model,
         gravity: D2::from_array([0.0; 3]),
         transfer: Transfer::Apic,
         domain_walls: Some(Contact::Sticky),
-        walls: Vec::new(),
+        walls: vec![Wall {
+            geometry: Geometry::Plane {
+                point: D2::from_array([0.0, height, 0.0]),
+                normal: D2::from_array([0.0, -1.0, 0.0]),
+            },
+            contact: Contact::Slip,
+            velocity: D2::from_array([0.0; 3]),
+            shift: D2::from_array([0.0; 3]),
+            id: 0,
+        }],
         loads_at_nodes: false,
     };
     let packing_cs = match params.model {
@@ -922,20 +931,17 @@ fn continuum_run(
         if pressing && to.is_none() && axial >= WINDOW.1 {
             to = Some((0..n).map(|k| (pts.id[k], pts.plastic_strain[k])).collect());
         }
-        pipe.phase1(&pts, &params, dt)
-            .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
-        let top = pts.x.iter().map(|x| x.y).fold(f64::NEG_INFINITY, f64::max);
+        // The top platen: a plane of the grid moving down, the material free to slip along
+        // it (Chen's free-slip top).
         let vy = if pressing {
             -speed * ((step + 1 - settle) as f64 * dt / ramp).min(1.0)
         } else {
             0.0
         };
+        params.walls[0].set_velocity(D2::from_array([0.0, vy, 0.0]), pipe.time);
         travel -= vy * dt;
-        pipe.for_each_node_mut(|ijk, _, v| {
-            if params.grid.origin[1] + ijk[1] as f64 * h >= top {
-                v.y = vy;
-            }
-        });
+        pipe.phase1(&pts, &params, dt)
+            .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
         pipe.phase2(&mut pts, &params, dt)
             .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
         if !pressing || !(step - settle).is_multiple_of(ORACLE_EVERY) {
