@@ -343,11 +343,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
     }
     let (from, to) = (from.context("the window's start")?, to.context("the window's end")?);
     let lateral = traction.iter().sum::<f64>() / traction.len() as f64;
-    let mut ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
-    ids.sort_unstable();
-    let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
-    let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
-    let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
+    let (x0, strain) = super::best_fit(&from, &to, d);
     let threshold = band::percentile(&strain, 0.98);
     let found = band::measure(&x0, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
     let (angle, fwhm) = band_line(&x0, &strain, &found.grains, d, w0.hypot(h0));
@@ -575,18 +571,13 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
         part.chart(&args.out, stem, caption, &chart)?;
     }
     for r in &runs {
-        let hot: Vec<(f64, f64)> = r.band.iter().map(|&i| (r.x0[i][0] / d, r.x0[i][1] / d)).collect();
-        let all: Vec<(f64, f64)> = r.x0.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
-        let chart = Chart {
-            title: format!("Biaxial compression (DEM, seed {}): the band's grains (App. A)", r.seed),
-            x_label: "x [D50]".into(),
-            y_label: "y [D50]".into(),
-            series: vec![
-                Series::new("a quarter of the grains", Kind::Points, all),
-                Series::new("band grains", Kind::Points, hot),
-            ],
-            ..Chart::default()
-        };
+        let chart = super::band_chart(
+            format!("Biaxial compression (DEM, seed {}): the band's grains (App. A)", r.seed),
+            &r.x0,
+            &r.band,
+            d,
+            "grains",
+        );
         part.chart(
             &args.out,
             &format!("shear_biaxial_band_s{}", r.seed),
@@ -599,15 +590,7 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
         )?;
     }
     if let Err(e) = continuum(&scene, material, &runs, args, &mut part, &mut md) {
-        tracing::error!("validate biaxial: the continuum failed: {e:#}");
-        let _ = writeln!(md, "### Continuum\n\nDid not finish: {e:#}\n");
-        part.check(
-            "biaxial (continuum) ran to its end",
-            "every run completes",
-            format!("{e:#}"),
-            "no error",
-            false,
-        );
+        super::unfinished(&mut part, &mut md, "Continuum", "biaxial (continuum)", &e);
     }
     part.md = md;
     Ok(part)
@@ -624,24 +607,11 @@ fn continuum(
     part: &mut Part,
     md: &mut String,
 ) -> anyhow::Result<()> {
-    use super::continuum::{CALIBRATION_GRAINS, PROBE_SEED, probed_moduli};
+    use super::continuum::CALIBRATION_GRAINS;
     let dem = &dems[0];
     let d = 2.0 * scene.materials[material].dem.as_ref().context("a DEM material")?.radius;
-    let t0 = std::time::Instant::now();
-    let cal = crate::calibrate::shear::simple_shear(scene, material, CALIBRATION_GRAINS, PRESSURE, &[1e-3], 1.0, 1)?;
-    let fit = crate::calibrate::shear::critical_state(&cal.transient)
-        .context("the calibration's simple shear has no peak above its critical state")?;
-    let (bulk, shear) = probed_moduli(scene, material, CALIBRATION_GRAINS, 40.0, PRESSURE, PROBE_SEED)?;
-    let calibration_wall = t0.elapsed().as_secs_f64();
-    let model = grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState {
-        bulk,
-        shear,
-        tan_friction_cs: fit.friction_angle.to_radians().tan(),
-        packing_cs: fit.packing_critical,
-        chi: fit.chi,
-        xi: fit.xi,
-        cohesion: 0.0,
-    };
+    let (model, fit, calibration_wall) = super::continuum::calibrated(scene, material, PRESSURE)?;
+    let (bulk, shear) = (model.bulk, model.shear);
     let runs: Vec<ContinuumBiaxial> = CELLS_D
         .iter()
         .map(|&c| continuum_run(dem, &model, scene.materials[material].density, d, c))
@@ -730,19 +700,14 @@ fn continuum(
         );
     }
     for r in &runs {
-        let hot: Vec<(f64, f64)> = r.band.iter().map(|&i| (r.x0[i][0] / d, r.x0[i][1] / d)).collect();
-        let all: Vec<(f64, f64)> = r.x0.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
         let cells = r.cell / d;
-        let chart = Chart {
-            title: format!("Biaxial compression (continuum, {cells:.0}-D50 cells): the band's points (App. A)"),
-            x_label: "x [D50]".into(),
-            y_label: "y [D50]".into(),
-            series: vec![
-                Series::new("a quarter of the points", Kind::Points, all),
-                Series::new("band points", Kind::Points, hot),
-            ],
-            ..Chart::default()
-        };
+        let chart = super::band_chart(
+            format!("Biaxial compression (continuum, {cells:.0}-D50 cells): the band's points (App. A)"),
+            &r.x0,
+            &r.band,
+            d,
+            "points",
+        );
         part.chart(
             &args.out,
             &format!("shear_biaxial_band_continuum_{cells:.0}d"),
@@ -881,18 +846,8 @@ fn continuum_run(
     }
     let n = pts.len();
     confine(&mut pts, 0..n, [0.0, -1e9, 0.0], [w, 1e9, 0.0], spacing, PRESSURE);
-    {
-        // Consolidated at p, as the grains: Hencky's b^e = e^(−p/K) I, τ = −p I.
-        use grains_mpm::matrix::Matrix;
-        let identity = <<D2 as grains_mpm::matrix::MpmSpace>::M as Matrix>::identity();
-        let bulk = match params.model {
-            Model::CriticalState(m) => m.bulk,
-            _ => unreachable!("built above"),
-        };
-        for k in 0..n {
-            pts.b_e[k] = identity * (-PRESSURE / bulk).exp();
-            pts.tau[k] = identity * -PRESSURE;
-        }
+    if let Model::CriticalState(m) = params.model {
+        super::continuum::consolidated(&mut pts, m.bulk, PRESSURE);
     }
     let mut pipe = MpmPipeline::<D2>::new(2).map_err(|e| anyhow::anyhow!(e))?;
     let cells = Grid {

@@ -67,18 +67,24 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let dems = planar_shear(args, &mut part, &mut md)?;
     // The DEM's results stand if the continuum cannot run.
     if let Err(e) = continuum::continuum_planar_shear(args, &dems, &mut part, &mut md) {
-        tracing::error!("validate shear: the continuum planar shear failed: {e:#}");
-        let _ = writeln!(md, "### §6.1: planar shear, continuum\n\nDid not finish: {e:#}\n");
-        part.check(
-            "planar shear (continuum) ran to its end",
-            "every run completes",
-            format!("{e:#}"),
-            "no error",
-            false,
-        );
+        unfinished(&mut part, &mut md, "§6.1: planar shear, continuum", "planar shear (continuum)", &e);
     }
     part.md = md;
     Ok(part)
+}
+
+/// A section of the report that stopped with an error `e` (the results before it stand):
+/// its heading `title` saying so, and a failed check that `what` ran to its end.
+fn unfinished(part: &mut Part, md: &mut String, title: &str, what: &str, e: &anyhow::Error) {
+    tracing::error!("validate: {what} failed: {e:#}");
+    let _ = writeln!(md, "### {title}\n\nDid not finish: {e:#}\n");
+    part.check(
+        format!("{what} ran to its end"),
+        "every run completes",
+        format!("{e:#}"),
+        "no error",
+        false,
+    );
 }
 
 /// What the DEM planar shear hands the continuum's: the specimen, its packing, the band.
@@ -174,14 +180,22 @@ struct Measured {
     fwhm: f64,
 }
 
-/// App. A on the grains that are in both `from` (the window's start) and `to` (its end),
-/// grains of diameter `d` in a cell `width` wide (periodic) and `height` high.
-fn band_of(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64, width: f64, height: f64) -> anyhow::Result<Measured> {
+/// Cundall's best-fit strain (App. A) of the grains in both `from` (positions at a window's
+/// start, by id) and `to` (at its end), over their neighbours within 1.5 diameters `d`: their
+/// positions at the start and their strains, in order of id.
+fn best_fit(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64) -> (Vec<[f64; 2]>, Vec<f64>) {
     let mut ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
     ids.sort_unstable();
     let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
     let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
     let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
+    (x0, strain)
+}
+
+/// App. A on the grains that are in both `from` (the window's start) and `to` (its end),
+/// grains of diameter `d` in a cell `width` wide (periodic) and `height` high.
+fn band_of(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64, width: f64, height: f64) -> anyhow::Result<Measured> {
+    let (x0, strain) = best_fit(from, to, d);
     let threshold = band::percentile(&strain, 0.98);
     // Boxed where the grains are at the window's start, x in the period (a band along x).
     let x_box: Vec<[f64; 2]> = x0.iter().map(|p| [p[0].rem_euclid(width), p[1]]).collect();
@@ -472,23 +486,13 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         "Planar shear (DEM): where the band is",
         &profile_chart,
     )?;
-    let hot: Vec<(f64, f64)> = first
-        .found
-        .grains
-        .iter()
-        .map(|&i| (first.x_box[i][0] / d, first.x_box[i][1] / d))
-        .collect();
-    let all: Vec<(f64, f64)> = first.x_box.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
-    let grains_chart = Chart {
-        title: format!("Planar shear (DEM, seed {}): the band's grains (App. A)", first.seed),
-        x_label: "x [D50]".into(),
-        y_label: "y [D50]".into(),
-        series: vec![
-            Series::new("a quarter of the grains", Kind::Points, all),
-            Series::new("band grains", Kind::Points, hot),
-        ],
-        ..Chart::default()
-    };
+    let grains_chart = band_chart(
+        format!("Planar shear (DEM, seed {}): the band's grains (App. A)", first.seed),
+        &first.x_box,
+        &first.found.grains,
+        d,
+        "grains",
+    );
     part.chart(
         &args.out,
         "shear_planar_band",
@@ -605,6 +609,23 @@ fn slab_profile(samples: impl Iterator<Item = (f64, f64)>, height: f64, d: f64) 
         .filter(|(_, b)| b.1 > 0)
         .map(|(k, b)| (b.0 / b.1 as f64, (k as f64 + 0.5) * SLAB_D))
         .collect()
+}
+
+/// A picture of a band by App. A: a quarter of the `what` (grains or points) at `x` [m], and
+/// the band's (`band`, indices into `x`), in D50 of `d`.
+fn band_chart(title: String, x: &[[f64; 2]], band: &[usize], d: f64, what: &str) -> Chart {
+    let hot: Vec<(f64, f64)> = band.iter().map(|&i| (x[i][0] / d, x[i][1] / d)).collect();
+    let all: Vec<(f64, f64)> = x.iter().step_by(4).map(|p| (p[0] / d, p[1] / d)).collect();
+    Chart {
+        title,
+        x_label: "x [D50]".into(),
+        y_label: "y [D50]".into(),
+        series: vec![
+            Series::new(format!("a quarter of the {what}"), Kind::Points, all),
+            Series::new(format!("band {what}"), Kind::Points, hot),
+        ],
+        ..Chart::default()
+    }
 }
 
 /// The width of a profile (value, height) at half its peak, in the profile's height unit: the
