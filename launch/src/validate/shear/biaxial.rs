@@ -108,15 +108,9 @@ impl Membrane {
     /// current positions and velocities) and moves the top end nodes with the top platen
     /// (wall 1), before a step of dt.
     pub fn load(&self, state: &mut DemState<D2>, dt: f64) {
+        let at = self.indices(&state.grains);
         let g = &mut state.grains;
-        let mut at = vec![usize::MAX; 2 * self.chains[0].len()];
         let n = self.chains[0].len();
-        for i in 0..g.len() {
-            if g.id[i] >= MEMBRANE {
-                let k = g.id[i] - MEMBRANE;
-                at[(k / CHAIN) as usize * n + (k % CHAIN) as usize] = i;
-            }
-        }
         let top_v = state.walls[1].velocity;
         for (side, inward) in [(0, 1.0), (1, -1.0)] {
             let idx = &at[side * n..(side + 1) * n];
@@ -165,21 +159,33 @@ impl Membrane {
             .sum();
         // The free nodes take the pressure from the middle of the first segment to the middle
         // of the last (the halves at the ends would load the platens' nodes).
-        let y = |k: usize| g.x[g.index_of(self.chains[0][k]).expect("a membrane node")].y;
+        let at = self.indices(g);
+        let y = |k: usize| g.x[at[k]].y;
         let n = self.chains[0].len();
         let height = 0.5 * (y(n - 2) + y(n - 1)) - 0.5 * (y(0) + y(1));
         push / (2.0 * height)
     }
 
+    /// The storage index of every node, the left chain then the right, bottom to top: one
+    /// pass over the grains (the DEM re-sorts them, so indices hold for one step only).
+    fn indices(&self, g: &Grains<D2>) -> Vec<usize> {
+        let n = self.chains[0].len();
+        let mut at = vec![usize::MAX; 2 * n];
+        for i in 0..g.len() {
+            if g.id[i] >= MEMBRANE {
+                let k = g.id[i] - MEMBRANE;
+                at[(k / CHAIN) as usize * n + (k % CHAIN) as usize] = i;
+            }
+        }
+        at
+    }
+
     /// The area enclosed by the chains' centre lines [m²].
     pub fn area(&self, state: &DemState<D2>) -> f64 {
         let g = &state.grains;
-        let at = |id: u64| g.x[g.index_of(id).expect("a membrane node")];
-        let ring: Vec<DVec2> = self.chains[1]
-            .iter()
-            .map(|&id| at(id))
-            .chain(self.chains[0].iter().rev().map(|&id| at(id)))
-            .collect();
+        let (at, n) = (self.indices(g), self.chains[0].len());
+        // Up the right chain, down the left.
+        let ring: Vec<DVec2> = at[n..].iter().chain(at[..n].iter().rev()).map(|&i| g.x[i]).collect();
         0.5 * (0..ring.len())
             .map(|k| {
                 let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
