@@ -38,6 +38,10 @@ pub struct ChuteArgs {
     /// Thickness of the coupled band, in cells.
     #[arg(long, default_value_t = 1.0)]
     pub band: f64,
+    /// Grains kept over the floor under the continuum, with a band of `--band` cells over
+    /// them (`coupling.discrete_base`) [m]; 0: the continuum reaches the floor.
+    #[arg(long, default_value_t = 0.0)]
+    pub base: f64,
     /// Simulated time of every run [s].
     #[arg(long, default_value_t = 0.1)]
     pub window: f64,
@@ -365,6 +369,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                     format!("domain.min=[0.0,{:e}]", -3.0 * h),
                     format!("coupling.discrete_layer={:e}", f * args.depth),
                     format!("coupling.hybrid_band={:e}", args.band * h),
+                    format!("coupling.discrete_base={:e}", args.base),
                     format!("coupling.dem_dt={dt:e}"),
                     "run.threads=2".into(),
                 ]);
@@ -475,7 +480,7 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
          solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
          hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
          of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
-         Continuum: {}.\n\n\
+         Discrete base over the floor: {} mm. Continuum: {}.\n\n\
          Surface: the mean down-slope velocity of the top {:.0}% of the mass; profile L1: Σ m |v − v_DEM| / Σ m |v_DEM| over \
          {} mm slabs above the floor (the pure DEM's over its pours), at the end of the window: a flux can agree while the \
          profile does not.\n\n\
@@ -485,6 +490,7 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
         args.window,
         args.pours,
         args.band,
+        1e3 * args.base,
         match args.continuum {
             Continuum::Scene => "the scene's",
             Continuum::CriticalState =>
@@ -664,6 +670,7 @@ mod tests {
             depths: vec![0.05],
             cells: vec![0.004],
             band: 1.0,
+            base: 0.0,
             window: 0.1,
             out: "out".into(),
             continuum: Continuum::Scene,

@@ -24,6 +24,11 @@ pub struct Coupling {
     /// ... then a band of this thickness [m] where grains and points overlap and are coupled;
     /// points only below it.
     pub hybrid_band: f64,
+    /// Grains also within this height [m] of the faces a hybrid body rests on (a wall or the
+    /// domain's edge, periodic axes excepted), with a band of `hybrid_band` over them; 0 (the
+    /// default): the continuum reaches the walls. A continuum that cannot carry the shear
+    /// near a rough floor leaves it to grains.
+    pub discrete_base: f64,
     /// How a hybrid grain takes the constrained velocities back.
     pub grain_transfer: GrainTransfer,
     /// With `"flip"`: the inertial number γ̇ √(d / |g|) of the material around a band grain
@@ -95,6 +100,7 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
             weight: 0.5,
             discrete_layer: band_default,
             hybrid_band: band_default,
+            discrete_base: 0.0,
             grain_transfer: GrainTransfer::Flip,
             quasi_static: 1e-3,
             contact_radius: None,
@@ -149,6 +155,10 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
         hybrid_band: match &c.hybrid_band {
             None => band_default,
             Some(t) => in_range(ctx, t, "coupling.hybrid_band", Open(0.0), Bound::None)?,
+        },
+        discrete_base: match &c.discrete_base {
+            None => 0.0,
+            Some(t) => in_range(ctx, t, "coupling.discrete_base", Closed(0.0), Bound::None)?,
         },
         grain_transfer: match c.grain_transfer.as_ref().map(|t| (t, t.get_ref().as_str())) {
             Some((_, "pic")) => GrainTransfer::Pic,

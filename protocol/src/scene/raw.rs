@@ -151,6 +151,7 @@ pub struct RawCoupling {
     pub weight: Option<Spanned<f64>>,
     pub discrete_layer: Option<Spanned<f64>>,
     pub hybrid_band: Option<Spanned<f64>>,
+    pub discrete_base: Option<Spanned<f64>>,
     pub grain_transfer: Option<Spanned<String>>,
     pub quasi_static: Option<Spanned<f64>>,
     pub contact_radius: Option<Spanned<f64>>,

@@ -53,9 +53,40 @@ pub fn depth(scene: &Scene, body: &Body, x: [f64; 3]) -> f64 {
     }
 }
 
+/// Height of `x` over the faces of `body` that rest on a wall or the domain's edge (periodic
+/// axes excepted) [m]; infinite for a ball or a box resting on nothing.
+fn height(scene: &Scene, body: &Body, x: [f64; 3]) -> f64 {
+    let Shape::Box { min, max } = body.shape else {
+        return f64::INFINITY;
+    };
+    let mut d = f64::INFINITY;
+    for k in (0..scene.dim()).filter(|&k| !scene.domain.periodic[k]) {
+        if supported(scene, k, true, min[k]) {
+            d = d.min(x[k] - min[k]);
+        }
+        if supported(scene, k, false, max[k]) {
+            d = d.min(max[k] - x[k]);
+        }
+    }
+    d
+}
+
+/// The depth that decides the layered zone of `x`: its depth under the free faces, or, with
+/// `coupling.discrete_base`, its height over the resting faces shifted so that the base layer
+/// reads as the discrete layer and the band over it as the band.
+fn zone_depth(scene: &Scene, body: &Body, x: [f64; 3]) -> f64 {
+    let d = depth(scene, body, x);
+    let base = scene.coupling.discrete_base;
+    if base > 0.0 {
+        d.min(height(scene, body, x) - base + band(scene).0)
+    } else {
+        d
+    }
+}
+
 /// The layered zone of material at `x` in a hybrid `body`.
 pub fn layered_zone(scene: &Scene, body: &Body, x: [f64; 3]) -> Zone {
-    zone_of_depth(scene, depth(scene, body, x))
+    zone_of_depth(scene, zone_depth(scene, body, x))
 }
 
 /// Depths [m] where the hybrid band begins and ends: `coupling.discrete_layer` and
@@ -129,7 +160,7 @@ impl ZoneField {
                         for xk in x.iter_mut().take(scene.dim()) {
                             *xk += 0.5 * cells.h;
                         }
-                        let d = depth(scene, body, x) - interface;
+                        let d = zone_depth(scene, body, x) - interface;
                         by_cell.entry(cell).and_modify(|e| *e = e.min(d)).or_insert(d);
                     }
                 }
@@ -288,11 +319,15 @@ hybrid_band = 0.003
 "#;
 
     fn scene() -> Scene {
+        scene_of(SCENE)
+    }
+
+    fn scene_of(text: &str) -> Scene {
         // One file per call: the tests run in parallel threads of one process.
         static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let path = std::env::temp_dir().join(format!("grains-zones-{}-{n}.toml", std::process::id()));
-        std::fs::write(&path, SCENE).unwrap();
+        std::fs::write(&path, text).unwrap();
         let s = grains_protocol::scene::load(&path).unwrap();
         std::fs::remove_file(&path).unwrap();
         s
@@ -355,5 +390,32 @@ hybrid_band = 0.003
         let mut bad = f.cells().to_vec();
         bad.swap(0, 1);
         assert!(ZoneField::from_cells(&s, &bad).unwrap_err().contains("increase strictly"));
+    }
+
+    /// `coupling.discrete_base` keeps grains over the faces the column rests on (the floor and
+    /// the left wall), with the band over them; the free faces keep their own layer.
+    #[test]
+    fn a_discrete_base_lines_the_resting_faces() {
+        let s = scene_of(&SCENE.replace("hybrid_band = 0.003\n", "hybrid_band = 0.003\ndiscrete_base = 0.002\n"));
+        assert_eq!(s.coupling.discrete_base, 0.002);
+        let column = &s.bodies[0];
+        let zone = |x: f64, y: f64| layered_zone(&s, column, [x, y, 0.0]);
+        // 1 mm over the floor (at 1.5 mm), 4 mm over it (the band: 2 to 5 mm), 6 mm over it.
+        assert_eq!(zone(0.02, 0.0025), Zone::Discrete);
+        assert_eq!(zone(0.02, 0.0055), Zone::Hybrid);
+        assert_eq!(zone(0.02, 0.0075), Zone::Continuum);
+        // 1 mm from the left wall, at mid-height.
+        assert_eq!(zone(0.001, 0.04), Zone::Discrete);
+        // The free faces as without it.
+        assert_eq!(zone(0.01, 0.0805), Zone::Discrete);
+        assert_eq!(zone(0.035, 0.04), Zone::Hybrid);
+        // The field, by the cells' centres: [2, 4] mm (1.5 mm over the floor) discrete, [4, 6]
+        // hybrid, [6, 8] continuum.
+        let f = ZoneField::layered(&s);
+        assert_eq!(f.zone_at([0.0201, 0.0021, 0.0]), Zone::Discrete);
+        assert_eq!(f.zone_at([0.0201, 0.0041, 0.0]), Zone::Hybrid);
+        assert_eq!(f.zone_at([0.0201, 0.0061, 0.0]), Zone::Continuum);
+        // A ball rests on nothing: unchanged.
+        assert_eq!(layered_zone(&s, &s.bodies[1], [0.071, 0.05, 0.0]), Zone::Continuum);
     }
 }
