@@ -65,6 +65,9 @@ const SETTLE: usize = 2000;
 const SEEDS: [u64; 3] = [1, 2, 3];
 /// The glued layer at the bottom [D50].
 const GLUE_D: f64 = 1.5;
+/// App. A counts the grains and points at least this many continuum cells inside the
+/// specimen's faces (the DEM: cells of the finer grid) ([`inner_band`]).
+const EDGE_CELLS: f64 = 2.0;
 
 /// A membrane on both sides of a box sample: the chains' node ids, bottom to top, and the
 /// pressure, spring and rest length it holds.
@@ -299,6 +302,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
             })
             .collect()
     };
+    let start = free(&state);
     let mut records = Vec::new();
     let (mut from, mut to) = (None, None);
     let mut traction = Vec::new();
@@ -349,10 +353,9 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
     }
     let (from, to) = (from.context("the window's start")?, to.context("the window's end")?);
     let lateral = traction.iter().sum::<f64>() / traction.len() as f64;
-    let (x0, strain) = super::best_fit(&from, &to, d);
-    let threshold = band::percentile(&strain, 0.98);
-    let found = band::measure(&x0, &strain, threshold, d).context("no band: fewer than three grains above the 98th percentile")?;
-    let (angle, fwhm) = band_line(&x0, &strain, &found.grains, d, w0.hypot(h0));
+    let (ids, x0, strain) = super::best_fit(&from, &to, d);
+    let start: Vec<[f64; 2]> = ids.iter().map(|id| start[id]).collect();
+    let (band, t_s, angle, fwhm) = inner_band(&x0, &strain, &start, EDGE_CELLS * CELLS_D[0] * d, d, d, w0.hypot(h0))?;
     let (peak, psi_peak) = peak_angles(&records);
     let (phi, psi) = window_angles(&records);
     Ok(BiaxialRun {
@@ -362,12 +365,12 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
         height: h0,
         packing,
         records,
-        t_s: found.thickness / d,
+        t_s,
         fwhm,
         angle,
-        counted: found.grains.len(),
+        counted: band.len(),
         x0,
-        band: found.grains,
+        band,
         peak,
         psi_peak,
         phi,
@@ -375,6 +378,38 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
         lateral,
         wall: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// App. A on the members of `x0` (positions at the window's start, their incremental
+/// `strain` over it) that lay at least `edge` inside the box bounding them all at the start of
+/// the shortening (`start`, the specimen's rectangle): nearer, the strain is the boundary's
+/// (the membrane's or the loads', the platens'), not the band's, and the 98th percentile
+/// picks the band's ends where it meets them. `size`: the members' diameter (a grain's, a
+/// point's spacing). The band (indices into `x0`), its thickness [D50] and [`band_line`]'s
+/// inclination and profile width.
+fn inner_band(
+    x0: &[[f64; 2]],
+    strain: &[f64],
+    start: &[[f64; 2]],
+    edge: f64,
+    size: f64,
+    d: f64,
+    reach: f64,
+) -> anyhow::Result<(Vec<usize>, f64, f64, f64)> {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in start {
+        for k in 0..2 {
+            (lo[k], hi[k]) = (lo[k].min(p[k]), hi[k].max(p[k]));
+        }
+    }
+    let inner: Vec<usize> = (0..x0.len())
+        .filter(|&i| (0..2).all(|k| start[i][k] > lo[k] + edge && start[i][k] < hi[k] - edge))
+        .collect();
+    let (x, e): (Vec<[f64; 2]>, Vec<f64>) = inner.iter().map(|&i| (x0[i], strain[i])).unzip();
+    let found =
+        band::measure(&x, &e, band::percentile(&e, 0.98), size).context("no band: fewer than three members above the 98th percentile")?;
+    let (angle, fwhm) = band_line(&x, &e, &found.grains, d, reach);
+    Ok((found.grains.iter().map(|&i| inner[i]).collect(), found.thickness / d, angle, fwhm))
 }
 
 /// The band's centre line, the principal axis of the band's members `band` among the
@@ -465,6 +500,8 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
          height a second (Chen's 2 cm/s) to {:.2}% of axial strain, the sides held at {PRESSURE:.0} Pa by a membrane of \
          nodes {NODE_SPACING_D} D50 apart (App. B: k_ms = {K_MS:.0} N/m, γ_ms = {GAMMA_MS} N s/m), the bottom no-slip \
          (grains within {GLUE_D} D50 glued), the top frictionless. Band (App. A) over axial strain {:.1}–{:.1}% (Fig. 18), \
+         counting the grains that started the shortening {:.0} D50 or more inside the specimen's faces (nearer, the strain \
+         is the membrane's and the platens'), \
          its inclination the least-squares line through App. A's grains; the profile of the incremental strain across that \
          line in {}-D50 slabs. One run per seed (the samples differ in their lattice's jitter and radii).\n\n\
          | seed | t_s (App. A) | profile across the band at half peak | grains counted | band's inclination from horizontal | peak φ (axial strain), ψ after it | φ, ψ over the window | the membrane's traction over the window / p | wall |\n\
@@ -479,6 +516,7 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
         100.0 * END,
         100.0 * WINDOW.0,
         100.0 * WINDOW.1,
+        EDGE_CELLS * CELLS_D[0],
         super::SLAB_D,
     );
     for r in &runs {
@@ -627,10 +665,11 @@ fn continuum(
         "### Continuum\n\nSeed {}'s specimen as Chen's critical-state continuum, calibrated as the planar shear's at this \
          test's {PRESSURE:.0} Pa ({CALIBRATION_GRAINS}-grain simple shear to strain 1 at I = 1e-3, small-strain probes of \
          another cell; {calibration_wall:.0} s): φ_cs = {:.2}°, Φ_cs = {:.4}, χ = {:.2}, ξ = {:.1}, K = {:.3e} Pa, G = {:.3e} \
-         Pa; the points at the DEM sample's packing {:.3}, one cell at the right face a quarter of the way up at Φ_cs \
-         (Chen's weak elements); σ3 as dead loads on the side columns of points; the bottom nodes fixed, the top nodes \
-         driven down at the DEM's speed and free sideways; the oracle with Table 6's coefficients. The band as the DEM's, on \
-         the points' plastic strain grown over the window.\n\n\
+         Pa; the points at the DEM sample's packing {:.3}, a square of {WEAK_D} D50 at the right face a quarter of the way up at \
+         Φ_cs (Chen's weak elements); σ3 as dead loads on the side columns of points; the bottom nodes fixed, the top a slip \
+         plane moving down at the DEM's speed; the oracle with Table 6's coefficients. The band as the DEM's, on the points' \
+         plastic strain grown over the window, counting the points that started {EDGE_CELLS} cells or more inside the \
+         specimen's faces (nearer, the strain is the loads' and the platens').\n\n\
          | cell | points | t_s (App. A) | profile across the band at half peak | inclination | oracle fires at axial strain (cells flagged) | peak φ (axial strain), ψ after it | φ, ψ over the window | wall |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         dem.seed, fit.friction_angle, fit.packing_critical, fit.chi, fit.xi, bulk, shear, dem.packing,
@@ -757,6 +796,11 @@ fn continuum(
 /// Continuum cells of the biaxial compression [D50] (the planar shear's two grids).
 const CELLS_D: [f64; 2] = [2.0, 4.0];
 
+/// Side of the square of weak points at the right face [D50], the same material flaw on both
+/// grids. Chen gives no size; one cell of 2 D50 left two conjugate bands, 6 D50 one band
+/// (docs/validation.md).
+const WEAK_D: f64 = 6.0;
+
 /// One continuum biaxial compression (Chen Fig. 18, right).
 struct ContinuumBiaxial {
     cell: f64,
@@ -779,9 +823,9 @@ struct ContinuumBiaxial {
 /// The biaxial compression of `dem`'s specimen as Chen's critical-state continuum `model`
 /// on cells of `cell_d` D50 (two points per cell and axis, APIC): σ3 = p as dead loads on the
 /// points of the side columns (`grains_mpm::points::confine`), the bottom nodes fixed, the top
-/// nodes driven down at the DEM's speed and free sideways, weak points (at Φ_cs) in one cell
-/// at the right face a quarter of the way up (Chen: "the right lower part"), the oracle (Alg.
-/// 1, Table 6) every ORACLE_EVERY steps.
+/// a slip plane of the grid moving down at the DEM's speed, weak points (at Φ_cs) in a square
+/// of WEAK_D at the right face a quarter of the way up (Chen: "the right lower part"), the
+/// oracle (Alg. 1, Table 6) every ORACLE_EVERY steps.
 fn continuum_run(
     dem: &BiaxialRun,
     model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
@@ -841,7 +885,7 @@ fn continuum_run(
     for j in 0..rows {
         for i in 0..cols {
             let x = [(i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing];
-            let weak = x[0] > w - h && (x[1] - 0.25 * height).abs() < 0.5 * h;
+            let weak = x[0] > w - WEAK_D * d && (x[1] - 0.25 * height).abs() < 0.5 * WEAK_D * d;
             pts.push(
                 D2::from_array([x[0], x[1], 0.0]),
                 rho * spacing * spacing,
@@ -851,6 +895,7 @@ fn continuum_run(
         }
     }
     let n = pts.len();
+    let start: HashMap<u64, [f64; 2]> = (0..n).map(|k| (pts.id[k], [pts.x[k].x, pts.x[k].y])).collect();
     confine(&mut pts, 0..n, [0.0, -1e9, 0.0], [w, 1e9, 0.0], spacing, PRESSURE);
     if let Model::CriticalState(m) = params.model {
         super::continuum::consolidated(&mut pts, m.bulk, PRESSURE);
@@ -955,17 +1000,16 @@ fn continuum_run(
     ids.sort_unstable();
     let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id].0).collect();
     let strain: Vec<f64> = ids.iter().map(|id| to[id] - from[id].1).collect();
-    let threshold = band::percentile(&strain, 0.98);
-    let found = band::measure(&x0, &strain, threshold, spacing).context("no band in the continuum")?;
-    let (angle, fwhm) = band_line(&x0, &strain, &found.grains, d, w.hypot(height));
+    let start: Vec<[f64; 2]> = ids.iter().map(|id| start[id]).collect();
+    let (band, t_s, angle, fwhm) = inner_band(&x0, &strain, &start, EDGE_CELLS * cell_d * d, spacing, d, w.hypot(height))?;
     Ok(ContinuumBiaxial {
         cell: h,
         points: n,
-        t_s: found.thickness / d,
+        t_s,
         fwhm,
         angle,
         detected,
-        band: found.grains,
+        band,
         x0,
         records,
         wall: t0.elapsed().as_secs_f64(),

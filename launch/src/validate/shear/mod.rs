@@ -183,19 +183,19 @@ struct Measured {
 /// Cundall's best-fit strain (App. A) of the grains in both `from` (positions at a window's
 /// start, by id) and `to` (at its end), over their neighbours within 1.5 diameters `d`: their
 /// positions at the start and their strains, in order of id.
-fn best_fit(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64) -> (Vec<[f64; 2]>, Vec<f64>) {
+fn best_fit(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64) -> (Vec<u64>, Vec<[f64; 2]>, Vec<f64>) {
     let mut ids: Vec<u64> = from.keys().copied().filter(|id| to.contains_key(id)).collect();
     ids.sort_unstable();
     let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id]).collect();
     let x1: Vec<[f64; 2]> = ids.iter().map(|id| to[id]).collect();
     let strain = band::best_fit_strain(&x0, &x1, &band::neighbours(&x0, 1.5 * d));
-    (x0, strain)
+    (ids, x0, strain)
 }
 
 /// App. A on the grains that are in both `from` (the window's start) and `to` (its end),
 /// grains of diameter `d` in a cell `width` wide (periodic) and `height` high.
 fn band_of(from: &HashMap<u64, [f64; 2]>, to: &HashMap<u64, [f64; 2]>, d: f64, width: f64, height: f64) -> anyhow::Result<Measured> {
-    let (x0, strain) = best_fit(from, to, d);
+    let (_, x0, strain) = best_fit(from, to, d);
     let threshold = band::percentile(&strain, 0.98);
     // Boxed where the grains are at the window's start, x in the period (a band along x).
     let x_box: Vec<[f64; 2]> = x0.iter().map(|p| [p[0].rem_euclid(width), p[1]]).collect();
