@@ -300,6 +300,7 @@ fn run_grains<S: MpmSpace>(case: &Case, threads: usize, untimed: usize, steps: u
         domain_walls: Some(Contact::Sticky),
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     let mut pipe = MpmPipeline::<S>::new(threads).map_err(anyhow::Error::msg)?;
     for k in 0..untimed {

@@ -132,6 +132,7 @@ fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
             domain_walls: None,
             walls: Vec::new(),
             loads_at_nodes: false,
+            ambient_pressure: 0.0,
         };
         // r_p: the points' spacing, the lower end of eq. 45 (as the scenes take it).
         let r_p = 0.5 * h;
@@ -207,6 +208,7 @@ fn block_on_slab(h: f64, length: f64, reach: f64, mu: f64) -> Run {
         domain_walls: None,
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);
     run(law(1e6, 0.3, mu), g, vec![slab], pts, params, r_p)
@@ -314,6 +316,7 @@ fn an_elastic_disk_dropped_on_a_rigid_slab_bounces_without_gaining_energy() {
         domain_walls: None,
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);
     let start = height(&pts);

@@ -48,6 +48,7 @@ fn run<S: MpmSpace + Space>(n: usize, fill: f64, threads: usize, steps: usize) {
         domain_walls: Some(Contact::Sticky),
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     let dt = 0.3 * cfl_time_step(&params.model, rho, h, S::DIM);
     let mut pipe = MpmPipeline::<S>::new(threads).unwrap();

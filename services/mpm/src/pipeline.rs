@@ -102,6 +102,14 @@ pub struct MpmParams<S: Space> {
     /// Point loads act on the node nearest the point instead of through its weights (Jiang
     /// 2020 §5.4's MPM-GRID scheme, to compare with).
     pub loads_at_nodes: bool,
+    /// The pressure of a fluid around the material [Pa] (a confining cell's): it acts on every
+    /// face the material does not share with a wall, following the faces as they move. By the
+    /// divergence theorem its nodal forces are those of a uniform stress −p I, so the
+    /// material's stress is taken as σ + p I in the internal force, and material at −p I is in
+    /// equilibrium node by node. (Point loads on the outermost points, the other way, leave
+    /// those points unstressed and yielding: GIMP hands part of each load to nodes the stress
+    /// does not reach.) 0: no fluid.
+    pub ambient_pressure: f64,
 }
 
 /// Node layers along each domain face that form its wall: with three layers no point can come
@@ -359,13 +367,20 @@ impl<S: MpmSpace> MpmPipeline<S> {
             (lo / bn * bn, (hi / bn + 1) * bn)
         };
         let zero = S::M::identity() * 0.0;
+        let ambient = params.ambient_pressure;
         let scatter_range = |nodes: &mut Vec<Acc<S>>, offset: usize, len: usize, range: std::ops::Range<usize>| {
             reset(nodes, len);
             for p in range {
                 let (w, xp) = (pts.weight[p], pts.x[p]);
                 let m = pts.mass[p] * w;
-                // Kirchhoff stress with the reference volume: f_i = −Σ V0 τ ∇w_ip.
-                let tau = pts.tau[p] * (pts.volume[p] * w);
+                // Kirchhoff stress with the reference volume: f_i = −Σ V0 τ ∇w_ip; the ambient
+                // pressure as the Kirchhoff stress J p I.
+                let tau = if ambient == 0.0 {
+                    pts.tau[p]
+                } else {
+                    pts.tau[p] + S::M::identity() * (ambient * pts.jacobian[p])
+                };
+                let tau = tau * (pts.volume[p] * w);
                 let apic = params.transfer == Transfer::Apic;
                 // FLIP never reads the affine matrices (a third of a 3D point's bytes).
                 let (v, c) = (pts.v[p], if apic { pts.affine[p] } else { zero });

@@ -37,6 +37,7 @@ fn params(grid: Grid, h: f64, ppc: usize, material: DruckerPragerYue) -> MpmPara
         domain_walls: None,
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     }
 }
 
@@ -284,6 +285,7 @@ fn elastic_bar_vibrates_at_c_over_2l_in_3d() {
         domain_walls: None,
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     // ν = 0 in 3D: κ = E/3, μ = E/2; the uniaxial stress modulus of a free rod is E.
     let c = (young / density).sqrt();
@@ -316,6 +318,7 @@ fn sand_params_2d(grid: Grid, h: f64, model: Model) -> MpmParams<D2> {
             id: 0,
         }],
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     }
 }
 
@@ -417,6 +420,7 @@ fn a_continuum_layer_on_an_incline_slides_as_a_coulomb_block() {
             id: 0,
         }],
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
     let mut pipe = pipeline::<D2>();
@@ -573,6 +577,70 @@ fn a_confining_pressure_is_carried_by_the_interior() {
         (mean - pressure).abs() < 0.03 * pressure,
         "interior pressure {mean} Pa vs {pressure} Pa"
     );
+}
+
+/// A block at the stress −p I of a confining fluid, in a frictional material at rest, stays
+/// there with `ambient_pressure` = p: every point keeps p to round-off and nothing moves (the
+/// fluid's nodal forces cancel the stress's node by node). Without the fluid the same block
+/// springs out from its faces, which the test checks too; with the pressure as point loads on
+/// the outer ring (`confine`) the ring's points yield and lose their stress.
+#[test]
+fn an_ambient_pressure_holds_a_block_at_its_stress() {
+    use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
+    use grains_mpm::matrix::Matrix;
+    use grains_mpm::points::confine;
+    let (h, density, pressure) = (0.02, 1000.0, 2e4);
+    let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], h, 2);
+    let (lo, hi) = ([0.3, 0.3], [0.7, 0.7]);
+    // Chen's Hencky model at its critical state (no dilatancy): Kirchhoff −p I from
+    // b^e = exp(−p / K) I in 2D, with J = 1.
+    let material = HenckyCriticalState {
+        bulk: 1.7e6,
+        shear: 7.7e5,
+        tan_friction_cs: 30f64.to_radians().tan(),
+        packing_cs: 0.8,
+        chi: 0.0,
+        xi: 0.0,
+        cohesion: 0.0,
+    };
+    let run = |ambient: f64, loads: bool| {
+        let mut pts = block(lo, hi, h, 2, density);
+        let mut p = params(grid, h, 2, DruckerPragerYue::new(2e6, 0.3, 30.0, 2));
+        p.model = Model::CriticalState(material);
+        p.ambient_pressure = ambient;
+        let identity = <D2 as MpmSpace>::M::identity();
+        for k in 0..pts.len() {
+            pts.b_e[k] = identity * (-pressure / material.bulk).exp();
+            pts.tau[k] = p.model.kirchhoff(&pts.b_e[k]);
+        }
+        if loads {
+            let n = pts.len();
+            confine(&mut pts, 0..n, [lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0], 0.5 * h, pressure);
+        }
+        let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
+        let mut pipe = pipeline::<D2>();
+        for _ in 0..500 {
+            pipe.step(&mut pts, &p, dt).unwrap();
+        }
+        let speed = pts.v.iter().map(|v| v.length()).fold(0.0, f64::max);
+        let worst = (0..pts.len())
+            .map(|k| (Model::pressure(&pts.tau[k], pts.jacobian[k]) - pressure).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "ambient {ambient} Pa, point loads {loads}: fastest point {speed:.3e} m/s, worst pressure off by {:.3e}",
+            worst / pressure
+        );
+        (speed, worst / pressure)
+    };
+    let (speed, error) = run(pressure, false);
+    assert!(
+        speed < 1e-12 && error < 1e-9,
+        "with the fluid: {speed} m/s, pressure off by {error}"
+    );
+    let (speed, error) = run(0.0, false);
+    assert!(speed > 1e-3 && error > 0.1, "without it: {speed} m/s, pressure off by {error}");
+    let (_, error) = run(0.0, true);
+    assert!(error > 0.5, "point loads: the outer ring's pressure off by {error}");
 }
 
 /// Memory follows the material: a small block in a 20 m × 20 m domain of 1 cm cells (4 million

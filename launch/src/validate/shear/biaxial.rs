@@ -355,7 +355,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
     let lateral = traction.iter().sum::<f64>() / traction.len() as f64;
     let (ids, x0, strain) = super::best_fit(&from, &to, d);
     let start: Vec<[f64; 2]> = ids.iter().map(|id| start[id]).collect();
-    let (band, t_s, angle, fwhm) = inner_band(&x0, &strain, &start, EDGE_CELLS * CELLS_D[0] * d, d, d, w0.hypot(h0))?;
+    let found = inner_band(&x0, &strain, &start, EDGE_CELLS * CELLS_D[0] * d, d, d, w0.hypot(h0))?;
     let (peak, psi_peak) = peak_angles(&records);
     let (phi, psi) = window_angles(&records);
     Ok(BiaxialRun {
@@ -365,12 +365,12 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
         height: h0,
         packing,
         records,
-        t_s,
-        fwhm,
-        angle,
-        counted: band.len(),
+        t_s: found.t_s,
+        fwhm: found.fwhm,
+        angle: found.angle,
+        counted: found.members.len(),
         x0,
-        band,
+        band: found.members,
         peak,
         psi_peak,
         phi,
@@ -385,17 +385,8 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
 /// the shortening (`start`, the specimen's rectangle): nearer, the strain is the boundary's
 /// (the membrane's or the loads', the platens'), not the band's, and the 98th percentile
 /// picks the band's ends where it meets them. `size`: the members' diameter (a grain's, a
-/// point's spacing). The band (indices into `x0`), its thickness [D50] and [`band_line`]'s
-/// inclination and profile width.
-fn inner_band(
-    x0: &[[f64; 2]],
-    strain: &[f64],
-    start: &[[f64; 2]],
-    edge: f64,
-    size: f64,
-    d: f64,
-    reach: f64,
-) -> anyhow::Result<(Vec<usize>, f64, f64, f64)> {
+/// point's spacing).
+fn inner_band(x0: &[[f64; 2]], strain: &[f64], start: &[[f64; 2]], edge: f64, size: f64, d: f64, reach: f64) -> anyhow::Result<InnerBand> {
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in start {
         for k in 0..2 {
@@ -409,7 +400,24 @@ fn inner_band(
     let found =
         band::measure(&x, &e, band::percentile(&e, 0.98), size).context("no band: fewer than three members above the 98th percentile")?;
     let (angle, fwhm) = band_line(&x, &e, &found.grains, d, reach);
-    Ok((found.grains.iter().map(|&i| inner[i]).collect(), found.thickness / d, angle, fwhm))
+    Ok(InnerBand {
+        members: found.grains.iter().map(|&i| inner[i]).collect(),
+        t_s: found.thickness / d,
+        length: found.length / d,
+        angle,
+        fwhm,
+    })
+}
+
+/// What [`inner_band`] measures.
+struct InnerBand {
+    /// App. A's band (indices into the positions), its box's thickness and length [D50].
+    members: Vec<usize>,
+    t_s: f64,
+    length: f64,
+    /// [`band_line`]'s inclination [°] and profile width [D50].
+    angle: f64,
+    fwhm: f64,
 }
 
 /// The band's centre line, the principal axis of the band's members `band` among the
@@ -666,11 +674,11 @@ fn continuum(
          test's {PRESSURE:.0} Pa ({CALIBRATION_GRAINS}-grain simple shear to strain 1 at I = 1e-3, small-strain probes of \
          another cell; {calibration_wall:.0} s): φ_cs = {:.2}°, Φ_cs = {:.4}, χ = {:.2}, ξ = {:.1}, K = {:.3e} Pa, G = {:.3e} \
          Pa; the points at the DEM sample's packing {:.3}, a square of {WEAK_D} D50 at the right face a quarter of the way up at \
-         Φ_cs (Chen's weak elements); σ3 as dead loads on the side columns of points; the bottom nodes fixed, the top a slip \
+         Φ_cs (Chen's weak elements); σ3 as a confining fluid's pressure on the free faces (the MPM's ambient pressure, `MpmParams::ambient_pressure`); the bottom nodes fixed, the top a slip \
          plane moving down at the DEM's speed; the oracle with Table 6's coefficients. The band as the DEM's, on the points' \
          plastic strain grown over the window, counting the points that started {EDGE_CELLS} cells or more inside the \
          specimen's faces (nearer, the strain is the loads' and the platens').\n\n\
-         | cell | points | t_s (App. A) | profile across the band at half peak | inclination | oracle fires at axial strain (cells flagged) | peak φ (axial strain), ψ after it | φ, ψ over the window | wall |\n\
+         | cell | points | t_s (App. A) | profile across the band at half peak | inclination | oracle fires at axial strain (cells flagged, their mean x, y) | peak φ (axial strain), ψ after it | φ, ψ over the window | wall |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         dem.seed, fit.friction_angle, fit.packing_critical, fit.chi, fit.xi, bulk, shear, dem.packing,
     );
@@ -685,9 +693,11 @@ fn continuum(
             r.t_s,
             r.fwhm,
             r.angle,
-            r.detected.map_or("never".into(), |(e, c, y)| format!(
-                "{:.2}% ({c}, mean height {y:.0} D50)",
-                100.0 * e
+            r.detected.map_or("never".into(), |(e, c, at)| format!(
+                "{:.2}% ({c}, mean at {:.0}, {:.0} D50)",
+                100.0 * e,
+                at[0],
+                at[1]
             )),
             peak.1,
             100.0 * peak.0,
@@ -700,16 +710,20 @@ fn continuum(
     let _ = writeln!(md);
     let dem_fwhm = dem.fwhm;
     let (fine, coarse) = (&runs[0], &runs[1]);
-    // A band through the specimen, not along the platen or the floor.
-    let through = |r: &ContinuumBiaxial| (30.0..=70.0).contains(&r.angle);
+    // A band through the specimen, not along the platen or the floor, and a band, not a blob:
+    // the top 2% of a band that crosses the specimen reach at least half across it.
+    let through = |r: &ContinuumBiaxial| (30.0..=70.0).contains(&r.angle) && r.length >= 0.5 * dem.width / d;
     part.check(
         "biaxial (continuum): the band crosses the specimen",
         "Chen 2021 Fig. 18: an inclined band from the weak elements",
         runs.iter()
-            .map(|r| format!("{:.1}° on {:.0}-D50 cells", r.angle, r.cell / d))
+            .map(|r| format!("{:.1}°, {:.0} D50 long on {:.0}-D50 cells", r.angle, r.length, r.cell / d))
             .collect::<Vec<_>>()
-            .join(", "),
-        "its line 30–70° from the horizontal on both grids",
+            .join("; "),
+        format!(
+            "its line 30–70° from the horizontal and App. A's box at least half the specimen's width ({:.0} D50) long, on both grids",
+            0.5 * dem.width / d
+        ),
         runs.iter().all(through),
     );
     part.check(
@@ -734,14 +748,19 @@ fn continuum(
         part.check(
             format!("biaxial (continuum, {cells:.0}-D50 cells): the oracle finds the band"),
             "Chen 2021 Alg. 1, Table 6: detected in the specimen before the band is measured",
-            r.detected.map_or("never".into(), |(e, c, y)| {
-                format!("at axial strain {:.2}%, {c} cells at {y:.0} D50 mean height", 100.0 * e)
+            r.detected.map_or("never".into(), |(e, c, at)| {
+                format!(
+                    "at axial strain {:.2}%, {c} cells, their mean at ({:.0}, {:.0}) D50",
+                    100.0 * e,
+                    at[0],
+                    at[1]
+                )
             }),
             format!(
                 "fires before {:.1}% of axial strain, the cells' mean more than two cells from the platens",
                 100.0 * WINDOW.0
             ),
-            r.detected.is_some_and(|(e, _, y)| e < WINDOW.0 && inside(y)),
+            r.detected.is_some_and(|(e, _, at)| e < WINDOW.0 && inside(at[1])),
         );
     }
     for r in &runs {
@@ -805,14 +824,16 @@ const WEAK_D: f64 = 6.0;
 struct ContinuumBiaxial {
     cell: f64,
     points: usize,
-    /// App. A on the points' incremental plastic strain over the window [D50], the profile
-    /// across the band's line at half peak [D50], the line's inclination [°].
+    /// App. A on the points' incremental plastic strain over the window: the box's thickness
+    /// and length [D50]; the profile across the band's line at half peak [D50], the line's
+    /// inclination [°].
     t_s: f64,
+    length: f64,
     fwhm: f64,
     angle: f64,
     /// The axial strain when Alg. 1 first fired, the cells it flagged then and their mean
-    /// height [D50].
-    detected: Option<(f64, usize, f64)>,
+    /// position [D50].
+    detected: Option<(f64, usize, [f64; 2])>,
     /// The points' positions at the window's start and App. A's band among them.
     x0: Vec<[f64; 2]>,
     band: Vec<usize>,
@@ -821,8 +842,8 @@ struct ContinuumBiaxial {
 }
 
 /// The biaxial compression of `dem`'s specimen as Chen's critical-state continuum `model`
-/// on cells of `cell_d` D50 (two points per cell and axis, APIC): σ3 = p as dead loads on the
-/// points of the side columns (`grains_mpm::points::confine`), the bottom nodes fixed, the top
+/// on cells of `cell_d` D50 (two points per cell and axis, APIC): σ3 = p as the pressure of a
+/// fluid around the specimen (`MpmParams::ambient_pressure`), the bottom nodes fixed, the top
 /// a slip plane of the grid moving down at the DEM's speed, weak points (at Φ_cs) in a square
 /// of WEAK_D at the right face a quarter of the way up (Chen: "the right lower part"), the
 /// oracle (Alg. 1, Table 6) every ORACLE_EVERY steps.
@@ -837,7 +858,7 @@ fn continuum_run(
     use grains_grid::{Grid, Kernel};
     use grains_mpm::boundary::{Contact, Geometry, Wall};
     use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
-    use grains_mpm::points::{Points, confine};
+    use grains_mpm::points::Points;
     use grains_oracle::shear_band::{self as oracle, Coefficients, Persistence, RecentStrain};
     let t0 = std::time::Instant::now();
     let (w, height) = (dem.width, dem.height);
@@ -875,6 +896,7 @@ fn continuum_run(
             id: 0,
         }],
         loads_at_nodes: false,
+        ambient_pressure: PRESSURE,
     };
     let packing_cs = match params.model {
         Model::CriticalState(m) => m.packing_cs,
@@ -896,7 +918,6 @@ fn continuum_run(
     }
     let n = pts.len();
     let start: HashMap<u64, [f64; 2]> = (0..n).map(|k| (pts.id[k], [pts.x[k].x, pts.x[k].y])).collect();
-    confine(&mut pts, 0..n, [0.0, -1e9, 0.0], [w, 1e9, 0.0], spacing, PRESSURE);
     if let Model::CriticalState(m) = params.model {
         super::continuum::consolidated(&mut pts, m.bulk, PRESSURE);
     }
@@ -964,19 +985,23 @@ fn continuum_run(
             let recent_cells = oracle::cell_average(&cells, 2, (0..n).map(|k| (at(k), pts.mass[k], recent_strain[k])));
             let flagged = oracle::flag(&cells, 2, &rate, &recent_cells, d, &coefficients);
             if persistence.update(t, flagged, tau_g) {
-                let ys: Vec<f64> = persistence
+                let at: Vec<[f64; 2]> = persistence
                     .flagged()
                     .iter()
                     .enumerate()
                     .filter(|(_, f)| **f)
-                    .map(|(i, _)| cells.origin[1] + ((i / cells.nodes[0] as usize) as f64 + 0.5) * h)
+                    .map(|(i, _)| {
+                        let nx = cells.nodes[0] as usize;
+                        [0, 1].map(|k| cells.origin[k] + ([i % nx, i / nx][k] as f64 + 0.5) * h)
+                    })
                     .collect();
-                let mean = ys.iter().sum::<f64>() / ys.len() as f64;
-                detected = Some((axial, ys.len(), mean / d));
+                let mean = [0, 1].map(|k| at.iter().map(|p| p[k]).sum::<f64>() / at.len() as f64 / d);
+                detected = Some((axial, at.len(), mean));
                 tracing::info!(
-                    "validate biaxial: continuum on {cell_d}-D50 cells: the oracle fires at axial strain {axial:.4}, {} cells, mean height {:.1} D50",
-                    ys.len(),
-                    mean / d
+                    "validate biaxial: continuum on {cell_d}-D50 cells: the oracle fires at axial strain {axial:.4}, {} cells, mean at ({:.1}, {:.1}) D50",
+                    at.len(),
+                    mean[0],
+                    mean[1]
                 );
             }
         }
@@ -1001,15 +1026,16 @@ fn continuum_run(
     let x0: Vec<[f64; 2]> = ids.iter().map(|id| from[id].0).collect();
     let strain: Vec<f64> = ids.iter().map(|id| to[id] - from[id].1).collect();
     let start: Vec<[f64; 2]> = ids.iter().map(|id| start[id]).collect();
-    let (band, t_s, angle, fwhm) = inner_band(&x0, &strain, &start, EDGE_CELLS * cell_d * d, spacing, d, w.hypot(height))?;
+    let found = inner_band(&x0, &strain, &start, EDGE_CELLS * cell_d * d, spacing, d, w.hypot(height))?;
     Ok(ContinuumBiaxial {
         cell: h,
         points: n,
-        t_s,
-        fwhm,
-        angle,
+        t_s: found.t_s,
+        length: found.length,
+        fwhm: found.fwhm,
+        angle: found.angle,
         detected,
-        band,
+        band: found.members,
         x0,
         records,
         wall: t0.elapsed().as_secs_f64(),

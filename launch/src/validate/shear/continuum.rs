@@ -279,6 +279,7 @@ pub(super) fn continuum_run(
         domain_walls: Some(Contact::Sticky),
         walls: Vec::new(),
         loads_at_nodes: false,
+        ambient_pressure: 0.0,
     };
     let mut pts = Points::<D2>::default();
     let rows = (height / spacing).round() as usize;

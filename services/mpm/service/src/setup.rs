@@ -170,6 +170,7 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
         }),
         walls,
         loads_at_nodes: scene.coupling.contact_forces == ContactForces::Nodes,
+        ambient_pressure: 0.0,
     };
     Ok((pts, params))
 }
