@@ -243,6 +243,23 @@ mod tests {
         check_err(&text, Some(line_of(&text, "substeps")), "coupling.substeps", "has no hybrid body");
     }
 
+    /// A discrete base is read with the fixed zones and refused with an adaptive oracle,
+    /// which would drop it.
+    #[test]
+    fn a_discrete_base_takes_fixed_zones() {
+        let s = from_str(&hybrid("discrete_base = 0.004"), Path::new("h.toml"), 1).unwrap();
+        assert_eq!(s.coupling.discrete_base, 0.004);
+        let text = format!("{}\n[oracle]\nkind = \"surface\"\n", hybrid("discrete_base = 0.004"));
+        check_err(
+            &text,
+            Some(line_of(&text, "discrete_base")),
+            "coupling.discrete_base",
+            "oracle.kind = \"fixed\"",
+        );
+        let text = hybrid("discrete_base = -0.001");
+        check_err(&text, Some(line_of(&text, "discrete_base")), "coupling.discrete_base", "");
+    }
+
     #[test]
     fn contact_forces_act_on_points_unless_the_scene_says_nodes() {
         use super::ContactForces;

@@ -337,6 +337,16 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
             "the scene has no [[body]] of material or [[rigid]] body (and is not a [synthetic] test scene): nothing to simulate".into(),
         ));
     }
+    if coupling.discrete_base > 0.0 && oracle.as_ref().is_some_and(|o| o.kind.adaptive()) {
+        let span = raw.coupling.as_ref().and_then(|c| c.discrete_base.as_ref()).map(|t| t.span());
+        return Err(ctx.err(
+            span,
+            Some("coupling.discrete_base"),
+            "a discrete base is a layered zone fixed to the material: it takes oracle.kind = \"fixed\" (an adaptive oracle \
+             places the zones itself and would drop the base at its first epoch)"
+                .into(),
+        ));
+    }
     if !rigids.is_empty() && domain.periodic.iter().any(|&p| p) {
         return Err(ctx.err(
             None,
