@@ -480,7 +480,7 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
          solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
          hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
          of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
-         Discrete base over the floor: {} mm. Continuum: {}.\n\n\
+         Discrete base over the floor: {:.1} mm. Continuum: {}.\n\n\
          Surface: the mean down-slope velocity of the top {:.0}% of the mass; profile L1: Σ m |v − v_DEM| / Σ m |v_DEM| over \
          {} mm slabs above the floor (the pure DEM's over its pours), at the end of the window: a flux can agree while the \
          profile does not.\n\n\

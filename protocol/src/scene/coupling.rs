@@ -257,7 +257,7 @@ mod tests {
             "oracle.kind = \"fixed\"",
         );
         let text = hybrid("discrete_base = -0.001");
-        check_err(&text, Some(line_of(&text, "discrete_base")), "coupling.discrete_base", "");
+        check_err(&text, Some(line_of(&text, "discrete_base")), "coupling.discrete_base", "got -0.001");
     }
 
     #[test]

@@ -102,8 +102,10 @@ pub struct MpmParams<S: Space> {
     /// Point loads act on the node nearest the point instead of through its weights (Jiang
     /// 2020 §5.4's MPM-GRID scheme, to compare with).
     pub loads_at_nodes: bool,
-    /// The pressure of a fluid around the material [Pa] (a confining cell's): it acts on every
-    /// face the material does not share with a wall, following the faces as they move. By the
+    /// The pressure of a fluid around the material [Pa] (a confining cell's), for MPM-only
+    /// material: it acts on every face, following the faces as they move (on a face against
+    /// a wall the wall's nodes take it, so a wall's reaction includes p A), scaled like the
+    /// stress by a point's hybrid weight; grains get none. By the
     /// divergence theorem its nodal forces are those of a uniform stress −p I, so the
     /// material's stress is taken as σ + p I in the internal force, and material at −p I is in
     /// equilibrium node by node. (Point loads on the outermost points, the other way, leave

@@ -581,9 +581,10 @@ fn a_confining_pressure_is_carried_by_the_interior() {
 
 /// A block at the stress −p I of a confining fluid, in a frictional material at rest, stays
 /// there with `ambient_pressure` = p: every point keeps p to round-off and nothing moves (the
-/// fluid's nodal forces cancel the stress's node by node). Without the fluid the same block
-/// springs out from its faces, which the test checks too; with the pressure as point loads on
-/// the outer ring (`confine`) the ring's points yield and lose their stress.
+/// fluid's nodal forces cancel the stress's node by node), also with the points' volume 10%
+/// under their reference one (the fluid's Kirchhoff stress is J p I). Without the fluid the
+/// same block springs out from its faces, which the test checks too. (With the pressure as
+/// point loads on the outer ring, `confine`, the ring's points lose their stress: printed.)
 #[test]
 fn an_ambient_pressure_holds_a_block_at_its_stress() {
     use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
@@ -603,14 +604,17 @@ fn an_ambient_pressure_holds_a_block_at_its_stress() {
         xi: 0.0,
         cohesion: 0.0,
     };
-    let run = |ambient: f64, loads: bool| {
+    // `jacobian`: the points' J (their volume over the reference one); the fluid's Kirchhoff
+    // stress is J p I, so a block at Cauchy −p I with J ≠ 1 is still in equilibrium.
+    let run = |ambient: f64, loads: bool, jacobian: f64| {
         let mut pts = block(lo, hi, h, 2, density);
+        pts.jacobian.iter_mut().for_each(|j| *j = jacobian);
         let mut p = params(grid, h, 2, DruckerPragerYue::new(2e6, 0.3, 30.0, 2));
         p.model = Model::CriticalState(material);
         p.ambient_pressure = ambient;
         let identity = <D2 as MpmSpace>::M::identity();
         for k in 0..pts.len() {
-            pts.b_e[k] = identity * (-pressure / material.bulk).exp();
+            pts.b_e[k] = identity * (-pressure * jacobian / material.bulk).exp();
             pts.tau[k] = p.model.kirchhoff(&pts.b_e[k]);
         }
         if loads {
@@ -632,15 +636,21 @@ fn an_ambient_pressure_holds_a_block_at_its_stress() {
         );
         (speed, worst / pressure)
     };
-    let (speed, error) = run(pressure, false);
+    let (speed, error) = run(pressure, false, 1.0);
     assert!(
         speed < 1e-12 && error < 1e-9,
         "with the fluid: {speed} m/s, pressure off by {error}"
     );
-    let (speed, error) = run(0.0, false);
+    // Compressed by 10% in area: the fluid's term must carry J (without it the block moves).
+    let (speed, error) = run(pressure, false, 0.9);
+    assert!(
+        speed < 1e-12 && error < 1e-9,
+        "with the fluid, J = 0.9: {speed} m/s, pressure off by {error}"
+    );
+    let (speed, error) = run(0.0, false, 1.0);
     assert!(speed > 1e-3 && error > 0.1, "without it: {speed} m/s, pressure off by {error}");
-    let (_, error) = run(0.0, true);
-    assert!(error > 0.5, "point loads: the outer ring's pressure off by {error}");
+    // The point loads, for the record (not asserted: a better `confine` may close the gap).
+    run(0.0, true, 1.0);
 }
 
 /// Memory follows the material: a small block in a 20 m × 20 m domain of 1 cm cells (4 million

@@ -414,9 +414,10 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64) -> any
 }
 
 /// App. A on the members of `x0` (positions at the window's start, their incremental
-/// `strain` over it) that lay at least `edge` inside the box bounding them all at the start of
-/// the shortening (`start`, the specimen's rectangle): nearer, the strain is the boundary's
-/// (the membrane's or the loads', the platens'), not the band's, and the 98th percentile
+/// `strain` over it) that lay at least `edge` inside the box bounding their centres at the
+/// start of the shortening (`start`; for the DEM the free grains', so the bottom margin is
+/// counted from the glued layer's top): nearer, the strain is the boundary's (the membrane's,
+/// the free faces', the platens'), not the band's, and the 98th percentile
 /// picks the band's ends where it meets them. `size`: the members' diameter (a grain's, a
 /// point's spacing).
 fn inner_band(x0: &[[f64; 2]], strain: &[f64], start: &[[f64; 2]], edge: f64, size: f64, d: f64, reach: f64) -> anyhow::Result<InnerBand> {
@@ -541,8 +542,8 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
          height a second (Chen's 2 cm/s) to {:.2}% of axial strain, the sides held at {PRESSURE:.0} Pa by a membrane of \
          nodes {NODE_SPACING_D} D50 apart (App. B: k_ms = {K_MS:.0} N/m, γ_ms = {GAMMA_MS} N s/m), the bottom no-slip \
          (grains within {GLUE_D} D50 glued), the top frictionless. Band (App. A) over axial strain {:.1}–{:.1}% (Fig. 18), \
-         counting the grains that started the shortening {:.0} D50 or more inside the specimen's faces (nearer, the strain \
-         is the membrane's and the platens'), \
+         counting the grains that started the shortening {:.0} D50 or more inside the box their centres spanned (the free \
+         grains'; nearer, the strain is the membrane's and the platens'), \
          its inclination the least-squares line through App. A's grains; the profile of the incremental strain across that \
          line in {}-D50 slabs. One run per seed (the samples differ in their lattice's jitter and radii).\n\n\
          | seed | t_s (App. A) | profile across the band at half peak | grains counted | band's inclination from horizontal | peak φ (axial strain), ψ after it | φ, ψ over the window | the membrane's traction over the window / p (the springs' net pull) | wall |\n\
@@ -710,8 +711,8 @@ fn continuum(
          Pa; the points at the DEM sample's packing {:.3}, a square of {WEAK_D} D50 at the right face a quarter of the way up at \
          Φ_cs (Chen's weak elements); σ3 as a confining fluid's pressure on the free faces (the MPM's ambient pressure, `MpmParams::ambient_pressure`); the bottom nodes fixed, the top a slip \
          plane moving down at the DEM's speed; the oracle with Table 6's coefficients. The band as the DEM's, on the points' \
-         plastic strain grown over the window, counting the points that started {EDGE_CELLS} cells or more inside the \
-         specimen's faces (nearer, the strain is the loads' and the platens').\n\n\
+         plastic strain grown over the window, counting the points that started {EDGE_CELLS} cells or more inside the box \
+         their centres spanned (nearer, the strain is the free faces' and the platens').\n\n\
          | cell | points | t_s (App. A) | profile across the band at half peak | inclination | oracle fires at axial strain (cells flagged, their mean x, y) | peak φ (axial strain), ψ after it | φ, ψ over the window | wall |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         dem.seed, fit.friction_angle, fit.packing_critical, fit.chi, fit.xi, bulk, shear, dem.packing,
@@ -745,7 +746,8 @@ fn continuum(
     let dem_fwhm = dem.fwhm;
     let (fine, coarse) = (&runs[0], &runs[1]);
     // A band through the specimen, not along the platen or the floor, and a band, not a blob:
-    // the top 2% of a band that crosses the specimen reach at least half across it.
+    // App. A's box (along the band) at least half the specimen's width long. (Its top 2% may
+    // cover part of the band only: on 2-D50 cells its upper half, 35 D50.)
     let through = |r: &ContinuumBiaxial| (30.0..=70.0).contains(&r.angle) && r.length >= 0.5 * dem.width / d;
     part.check(
         "biaxial (continuum): the band crosses the specimen",
