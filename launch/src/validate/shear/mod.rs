@@ -35,6 +35,7 @@ pub(super) mod biaxial;
 mod continuum;
 mod hybrid;
 mod large;
+mod membrane;
 mod training;
 
 /// The scene whose grains the planar shear uses (Chen's Table 1).
