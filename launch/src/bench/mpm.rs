@@ -299,7 +299,7 @@ fn run_grains<S: MpmSpace>(case: &Case, threads: usize, untimed: usize, steps: u
         transfer: Transfer::Flip(FLIP),
         domain_walls: Some(Contact::Sticky),
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     let mut pipe = MpmPipeline::<S>::new(threads).map_err(anyhow::Error::msg)?;

@@ -131,7 +131,7 @@ fn an_elastic_disk_hitting_a_rigid_disk_gives_it_its_kinetic_energy() {
             transfer: Transfer::Flip(1.0),
             domain_walls: None,
             walls: Vec::new(),
-            loads_at_nodes: false,
+            point_loads: grains_mpm::pipeline::PointLoads::Weights,
             ambient_pressure: 0.0,
         };
         // r_p: the points' spacing, the lower end of eq. 45 (as the scenes take it).
@@ -207,7 +207,7 @@ fn block_on_slab(h: f64, length: f64, reach: f64, mu: f64) -> Run {
         transfer: Transfer::Flip(0.0),
         domain_walls: None,
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);
@@ -315,7 +315,7 @@ fn an_elastic_disk_dropped_on_a_rigid_slab_bounces_without_gaining_energy() {
         transfer: Transfer::Flip(1.0),
         domain_walls: None,
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     let slab = Body::new(0, &slab, a, rho, 0, Motion::Fixed);

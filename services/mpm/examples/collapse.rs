@@ -47,7 +47,7 @@ fn run<S: MpmSpace + Space>(n: usize, fill: f64, threads: usize, steps: usize) {
         transfer: Transfer::Flip(0.95),
         domain_walls: Some(Contact::Sticky),
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     let dt = 0.3 * cfl_time_step(&params.model, rho, h, S::DIM);

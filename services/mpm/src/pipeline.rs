@@ -87,6 +87,23 @@ impl Model {
     }
 }
 
+/// How a point load ([`Points::loads`]) reaches the grid's nodes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PointLoads {
+    /// Through the point's weights (Jiang 2020 §4: the force on the point). A load on an
+    /// outermost point then hands part of itself to the nodes inside the material, past the
+    /// cell the point is in: that cell's stress carries only the rest (about 3/4 on GIMP with
+    /// two points per cell).
+    Weights,
+    /// On the node nearest the point (Jiang 2020 §5.4's MPM-GRID scheme, to compare with).
+    Nearest,
+    /// As a traction on the point's face the load comes from: at x_p − l f/|f| (l the GIMP
+    /// half-width), spread by the linear hat, as a finite element takes a surface load. The
+    /// cells between that face and the nodes carry it whole: the outermost points are
+    /// stressed as the rest (`validate::shear::biaxial`'s platen test).
+    Face,
+}
+
 /// Parameters of a step.
 #[derive(Clone, Debug)]
 pub struct MpmParams<S: Space> {
@@ -99,9 +116,8 @@ pub struct MpmParams<S: Space> {
     /// leaves them free (then points must be kept away from the domain faces otherwise).
     pub domain_walls: Option<Contact>,
     pub walls: Vec<Wall<S>>,
-    /// Point loads act on the node nearest the point instead of through its weights (Jiang
-    /// 2020 §5.4's MPM-GRID scheme, to compare with).
-    pub loads_at_nodes: bool,
+    /// How a point load reaches the nodes.
+    pub point_loads: PointLoads,
     /// The pressure of a fluid around the material [Pa] (a confining cell's), for MPM-only
     /// material: it acts on every face, following the faces as they move (on a face against
     /// a wall the wall's nodes take it, so a wall's reaction includes p A), scaled like the
@@ -424,19 +440,43 @@ impl<S: MpmSpace> MpmPipeline<S> {
         for &(p, f) in &pts.loads {
             let st = stencil::<S>(grid, &weights, pts.x[p]);
             let nodes = &mut self.nodes;
-            if params.loads_at_nodes {
-                // The node of the largest weight (the first of equals): the nearest one.
-                let mut best = (usize::MAX, 0.0);
-                for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| {
-                    if wip > best.1 {
-                        best = (i, wip);
+            match params.point_loads {
+                PointLoads::Nearest => {
+                    // The node of the largest weight (the first of equals): the nearest one.
+                    let mut best = (usize::MAX, 0.0);
+                    for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| {
+                        if wip > best.1 {
+                            best = (i, wip);
+                        }
+                    });
+                    if best.0 != usize::MAX {
+                        nodes[best.0].force += f;
                     }
-                });
-                if best.0 != usize::MAX {
-                    nodes[best.0].force += f;
                 }
-            } else {
-                for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
+                PointLoads::Weights => {
+                    for_stencil::<S>(grid, map, &st, pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
+                }
+                PointLoads::Face => {
+                    let l = match params.kernel {
+                        Kernel::Gimp { half_width } => half_width,
+                        Kernel::Bspline2 => 0.0,
+                    };
+                    let len = f.length();
+                    let face = if len > 0.0 { pts.x[p] - f * (l / len) } else { pts.x[p] };
+                    // The face lies within l ≤ h/2 of the point, so the two nodes about it on
+                    // each axis are among the point's stencil's three.
+                    let linear = |x: S::V| {
+                        let mut s = st;
+                        for (k, &xk) in S::to_array(x).iter().enumerate().take(S::DIM) {
+                            for a in 0..3 {
+                                let node = grid.origin[k] + grid.h * (st.start[k] + a as i64) as f64;
+                                s.w[k][a] = (1.0 - (xk - node).abs() / grid.h).max(0.0);
+                            }
+                        }
+                        s
+                    };
+                    for_stencil::<S>(grid, map, &linear(face), pts.x[p], |i, wip, _, _| nodes[i].force += f * wip);
+                }
             }
         }
         Ok(())

@@ -36,7 +36,7 @@ fn params(grid: Grid, h: f64, ppc: usize, material: DruckerPragerYue) -> MpmPara
         transfer: Transfer::Flip(1.0),
         domain_walls: None,
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     }
 }
@@ -284,7 +284,7 @@ fn elastic_bar_vibrates_at_c_over_2l_in_3d() {
         transfer: Transfer::Flip(1.0),
         domain_walls: None,
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     // ν = 0 in 3D: κ = E/3, μ = E/2; the uniaxial stress modulus of a free rod is E.
@@ -317,7 +317,7 @@ fn sand_params_2d(grid: Grid, h: f64, model: Model) -> MpmParams<D2> {
             shift: DVec2::ZERO,
             id: 0,
         }],
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     }
 }
@@ -419,7 +419,7 @@ fn a_continuum_layer_on_an_incline_slides_as_a_coulomb_block() {
             shift: DVec2::ZERO,
             id: 0,
         }],
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
@@ -704,15 +704,17 @@ fn broken_states_stop_naming_the_phase() {
 /// A point load for one step (the contact coupling's): spread with the point's weights it
 /// reaches every point sharing one of its nodes; put on the nearest node instead (Jiang 2020
 /// §5.4's MPM-GRID) only the points within that node's support move. Both add F dt to the
-/// momentum exactly (FLIP, no walls, no gravity).
+/// momentum exactly (FLIP, no walls, no gravity), and so does the load on the point's face
+/// (`PointLoads::Face`).
 #[test]
 fn a_point_load_acts_through_the_weights_or_on_the_nearest_node() {
+    use grains_mpm::pipeline::PointLoads;
     let h = 0.05;
     let lp = 0.25 * h;
     let f = DVec2::new(3.0, -1.0);
     let dt = 1e-4;
     let mut moved = Vec::new();
-    for at_nodes in [false, true] {
+    for mode in [PointLoads::Weights, PointLoads::Nearest, PointLoads::Face] {
         let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], h, 2);
         let mut pts = block([0.3, 0.3], [0.7, 0.7], h, 2, 1000.0);
         // A point near the middle: x = 0.5125, y = 0.4875 (a quarter cell off the node (0.5, 0.5)).
@@ -726,11 +728,11 @@ fn a_point_load_acts_through_the_weights_or_on_the_nearest_node() {
         let node = (pts.x[p] / h).round() * h;
         pts.loads.push((p, f));
         let mut params = params(grid, h, 2, DruckerPragerYue::new(1e5, 0.3, 30.0, 2));
-        params.loads_at_nodes = at_nodes;
+        params.point_loads = mode;
         let p0: DVec2 = pts.v.iter().zip(&pts.mass).map(|(v, m)| *v * *m).sum();
         pipeline::<D2>().step(&mut pts, &params, dt).unwrap();
         let p1: DVec2 = pts.v.iter().zip(&pts.mass).map(|(v, m)| *v * *m).sum();
-        assert!((p1 - p0 - f * dt).length() < 1e-12 * (f * dt).length(), "momentum: {:?}", p1 - p0);
+        assert!((p1 - p0 - f * dt).length() < 1e-12 * (f * dt).length(), "{mode:?}: momentum {:?}", p1 - p0);
         // Points outside the nearest node's support (|x − x_j| ≥ h + l_p along an axis).
         let outside: Vec<bool> = (0..pts.len())
             .map(|k| {

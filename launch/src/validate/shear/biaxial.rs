@@ -525,8 +525,8 @@ fn continuum(
          test's {PRESSURE:.0} Pa ({CALIBRATION_GRAINS}-grain simple shear to strain 1 at I = 1e-3, small-strain probes of \
          another cell; {calibration_wall:.0} s): φ_cs = {:.2}°, Φ_cs = {:.4}, χ = {:.2}, ξ = {:.1}, K = {:.3e} Pa, G = {:.3e} \
          Pa; the points at the DEM sample's packing {:.3}, a square of {WEAK_D} D50 at the right face a quarter of the way up at \
-         Φ_cs (Chen's weak elements); σ3 as a confining fluid's pressure on the free faces (the MPM's ambient pressure, `MpmParams::ambient_pressure`); the bottom nodes fixed, the top a slip \
-         plane moving down at the DEM's speed; the oracle with Table 6's coefficients. The band as the DEM's, on the points' \
+         Φ_cs (Chen's weak elements); σ3 as a confining fluid's pressure on the free faces (the MPM's ambient pressure, `MpmParams::ambient_pressure`); the bottom nodes fixed, the top a \
+         frictionless rigid plane moving down at the DEM's speed, in contact with the points (its force on their faces); the oracle with Table 6's coefficients. The band as the DEM's, on the points' \
          plastic strain grown over the window, counting the points that started {EDGE_CELLS} cells or more inside the box \
          their centres spanned (nearer, the strain is the free faces' and the platens').\n\n\
          | cell | points | t_s (App. A) | profile across the band at half peak | inclination | oracle fires at axial strain (cells flagged, their mean x, y) | peak φ (axial strain), ψ after it | φ, ψ over the window | wall |\n\
@@ -696,7 +696,8 @@ struct ContinuumBiaxial {
 /// The biaxial compression of `dem`'s specimen as Chen's critical-state continuum `model`
 /// on cells of `cell_d` D50 (two points per cell and axis, APIC): σ3 = p as the pressure of a
 /// fluid around the specimen (`MpmParams::ambient_pressure`), the bottom nodes fixed, the top
-/// a slip plane of the grid moving down at the DEM's speed, weak points (at Φ_cs) in a square
+/// a frictionless plane moving down at the DEM's speed in contact with the points
+/// ([`platen`]), weak points (at Φ_cs) in a square
 /// of WEAK_D at the right face a quarter of the way up (Chen: "the right lower part"), the
 /// oracle (Alg. 1, Table 6) every ORACLE_EVERY steps.
 fn continuum_run(
@@ -708,7 +709,7 @@ fn continuum_run(
 ) -> anyhow::Result<ContinuumBiaxial> {
     use super::continuum::ORACLE_EVERY;
     use grains_grid::{Grid, Kernel};
-    use grains_mpm::boundary::{Contact, Geometry, Wall};
+    use grains_mpm::boundary::Contact;
     use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
     use grains_mpm::points::Points;
     use grains_oracle::shear_band::{self as oracle, Coefficients, Persistence, RecentStrain};
@@ -728,26 +729,18 @@ fn continuum_run(
     };
     let rho = grain_density * dem.packing;
     let shear_modulus = model.shear;
+    let platen_stiffness = model.wave_speed_modulus(2);
     let model = Model::CriticalState(*model);
     let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, h, 2);
-    let mut params = MpmParams::<D2> {
+    let params = MpmParams::<D2> {
         grid,
         kernel: Kernel::Gimp { half_width: 0.5 * spacing },
         model,
         gravity: D2::from_array([0.0; 3]),
         transfer: Transfer::Apic,
         domain_walls: Some(Contact::Sticky),
-        walls: vec![Wall {
-            geometry: Geometry::Plane {
-                point: D2::from_array([0.0, height, 0.0]),
-                normal: D2::from_array([0.0, -1.0, 0.0]),
-            },
-            contact: Contact::Slip,
-            velocity: D2::from_array([0.0; 3]),
-            shift: D2::from_array([0.0; 3]),
-            id: 0,
-        }],
-        loads_at_nodes: false,
+        walls: Vec::new(),
+        point_loads: grains_mpm::pipeline::PointLoads::Face,
         ambient_pressure: PRESSURE,
     };
     let packing_cs = match params.model {
@@ -810,14 +803,14 @@ fn continuum_run(
         if pressing && to.is_none() && axial >= WINDOW.1 {
             to = Some((0..n).map(|k| (pts.id[k], pts.plastic_strain[k])).collect());
         }
-        // The top platen: a plane of the grid moving down, the material free to slip along
-        // it (Chen's free-slip top).
+        // The top platen moving down, the material free to slip along it (Chen's free-slip
+        // top).
         let vy = if pressing {
             -speed * ((step + 1 - settle) as f64 * dt / ramp).min(1.0)
         } else {
             0.0
         };
-        params.walls[0].set_velocity(D2::from_array([0.0, vy, 0.0]), pipe.time);
+        platen(&mut pts, height - travel, vy, 0.5 * spacing, platen_stiffness);
         travel -= vy * dt;
         pipe.phase1(&pts, &params, dt)
             .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
@@ -894,10 +887,165 @@ fn continuum_run(
     })
 }
 
+/// The top platen as a rigid, frictionless plane at `at` moving at `vy`, in contact with the
+/// points (as the DEM's platen with the grains, and Jiang 2020 §4's bodies with points), not
+/// a condition on the grid's nodes: a point whose top (its GIMP half-width `reach` over its
+/// centre) is above the plane carries k · overlap down, k the material's P-wave modulus (over
+/// a unit thickness: as stiff as a point spacing of the material), with the damping of a
+/// restitution of 0.2 on its approach. The run takes the loads on the points' faces
+/// ([`PointLoads::Face`](grains_mpm::pipeline::PointLoads::Face)). A slip plane of the nodes
+/// clamps the rows of nodes it has passed, a cell into the material at most, and on these
+/// grids the oracle then fired where the band met the platen (docs/validation.md).
+fn platen(pts: &mut grains_mpm::points::Points<D2>, at: f64, vy: f64, reach: f64, stiffness: f64) {
+    let e: f64 = 0.2;
+    let zeta = -e.ln() / (std::f64::consts::PI.powi(2) + e.ln().powi(2)).sqrt();
+    pts.loads.clear();
+    for k in 0..pts.len() {
+        let overlap = pts.x[k].y + reach - at;
+        if overlap > 0.0 {
+            let approach = pts.v[k].y - vy;
+            let damping = 2.0 * zeta * (stiffness * pts.mass[k]).sqrt();
+            let f = (stiffness * overlap + damping * approach).max(0.0);
+            pts.loads.push((k, D2::from_array([0.0, -f, 0.0])));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::calibrate::box_stresses;
+
+    /// σyy by row of points (mean of −τ_yy / J, bottom first) of an elastic block of 20 × 30
+    /// points (two per cell and axis, the continuum biaxial's layout) in a fluid at p, fixed at
+    /// the bottom, pressed 0.3% by a frictionless top moving down, held there, and the top's
+    /// force over the block's width. The top is [`platen`] on the points, or a slip plane of
+    /// the grid's nodes as the biaxial had it.
+    fn pressed_block(on_points: bool) -> (Vec<f64>, f64) {
+        use grains_grid::{Grid, Kernel};
+        use grains_mpm::boundary::{Contact, Geometry, Wall};
+        use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
+        use grains_mpm::matrix::{Matrix, MpmSpace};
+        use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
+        use grains_mpm::points::Points;
+        let (spacing, cols, rows, rho, p) = (1e-3, 20usize, 30usize, 1600.0, PRESSURE);
+        let (w, height, h) = (cols as f64 * spacing, rows as f64 * spacing, 2.0 * spacing);
+        let model = Model::Elastic(DruckerPragerYue {
+            bulk: 1e6,
+            shear: 0.6e6,
+            alpha: 0.0,
+            rate: None,
+        });
+        let top = Wall {
+            geometry: Geometry::Plane {
+                point: D2::from_array([0.0, height, 0.0]),
+                normal: D2::from_array([0.0, -1.0, 0.0]),
+            },
+            contact: Contact::Slip,
+            velocity: D2::from_array([0.0; 3]),
+            shift: D2::from_array([0.0; 3]),
+            id: 0,
+        };
+        let mut params = MpmParams::<D2> {
+            grid: Grid {
+                origin: [-4.0 * h, -2.0 * h, 0.0],
+                h,
+                nodes: [cols as u64 / 2 + 9, rows as u64 / 2 + 8, 1],
+                period: [0, 0, 0],
+            },
+            kernel: Kernel::Gimp { half_width: 0.5 * spacing },
+            model,
+            gravity: D2::from_array([0.0; 3]),
+            transfer: Transfer::Apic,
+            domain_walls: Some(Contact::Sticky),
+            walls: if on_points { Vec::new() } else { vec![top] },
+            point_loads: grains_mpm::pipeline::PointLoads::Face,
+            ambient_pressure: p,
+        };
+        let mut pts = Points::<D2>::default();
+        let b_e = model.strain_of_stress(&(<D2 as MpmSpace>::M::identity() * -p));
+        for j in 0..rows {
+            for i in 0..cols {
+                let x = D2::from_array([(i as f64 + 0.5) * spacing, (j as f64 + 0.5) * spacing, 0.0]);
+                pts.push(x, rho * spacing * spacing, spacing * spacing, 0.6);
+                let k = pts.len() - 1;
+                pts.b_e[k] = b_e;
+                pts.tau[k] = model.kirchhoff(&b_e);
+            }
+        }
+        let modulus = model.p_wave_modulus(2);
+        let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, h, 2);
+        let transit = height / (modulus / rho).sqrt();
+        // Pressed over 40 transits, held for 40.
+        let (press, hold) = ((40.0 * transit / dt) as usize, (40.0 * transit / dt) as usize);
+        let speed = 0.003 * height / (press as f64 * dt);
+        let mut pipe = MpmPipeline::<D2>::new(1).unwrap();
+        let (mut travel, mut rows_syy, mut force) = (0.0, vec![0.0; rows], 0.0);
+        for step in 0..press + hold {
+            let vy = if step < press { -speed } else { 0.0 };
+            if on_points {
+                platen(&mut pts, height - travel, vy, 0.5 * spacing, modulus);
+            } else {
+                params.walls[0].set_velocity(D2::from_array([0.0, vy, 0.0]), pipe.time);
+            }
+            travel -= vy * dt;
+            pipe.phase1(&pts, &params, dt).unwrap();
+            pipe.phase2(&mut pts, &params, dt).unwrap();
+            if step >= press + hold / 2 {
+                let mut by_row = vec![(0.0, 0usize); rows];
+                for k in 0..pts.len() {
+                    let j = ((pts.id[k] as usize) / cols).min(rows - 1);
+                    by_row[j].0 -= pts.tau[k].y_axis.y / pts.jacobian[k];
+                    by_row[j].1 += 1;
+                }
+                for (r, (s, c)) in rows_syy.iter_mut().zip(by_row) {
+                    *r += s / c as f64 / (hold - hold / 2) as f64;
+                }
+                force += if on_points {
+                    pts.loads.iter().map(|(_, f)| -f.y).sum::<f64>()
+                } else {
+                    pipe.wall_loads[0].y
+                } / (hold - hold / 2) as f64;
+            }
+        }
+        (rows_syy, force / w)
+    }
+
+    /// The top platen on the points' faces passes an even σyy to the top row of an elastic
+    /// block (statics: σyy the same in every row, and the platen's force over the width with
+    /// the fluid's p): 0.7% worst, where a slip plane of the grid's nodes (the platen the
+    /// biaxial had) puts the top rows 4% over (printed). Fails with the loads through the
+    /// points' weights (`PointLoads::Weights`: the top cell carries 3/4, 21.7% off), or with
+    /// the platen's force lost or of the wrong sign.
+    #[test]
+    fn the_platen_on_the_points_loads_the_top_row_as_the_rest() {
+        for on_points in [false, true] {
+            let (rows, platen) = pressed_block(on_points);
+            let n = rows.len();
+            let middle = rows[n / 3..2 * n / 3].iter().sum::<f64>() / (n / 3) as f64;
+            let worst = rows.iter().map(|s| (s / middle - 1.0).abs()).fold(0.0, f64::max);
+            eprintln!(
+                "platen on the {}: σyy middle {middle:.1} Pa, top rows {:.1} {:.1} {:.1} {:.1}, bottom {:.1} {:.1}, worst row {:.1}% off, the platen's force / width {platen:.1} Pa",
+                if on_points { "points" } else { "nodes" },
+                rows[n - 1],
+                rows[n - 2],
+                rows[n - 3],
+                rows[n - 4],
+                rows[0],
+                rows[1],
+                100.0 * worst
+            );
+            if on_points {
+                assert!(middle > 1.5 * PRESSURE, "the block is pressed: σyy {middle:.1} Pa");
+                assert!(worst < 0.05, "a row's σyy is {:.1}% off the middle's", 100.0 * worst);
+                // The platen carries σyy less the fluid's p on the top face.
+                assert!(
+                    ((platen + PRESSURE) / middle - 1.0).abs() < 0.05,
+                    "{platen:.1} + p against {middle:.1}"
+                );
+            }
+        }
+    }
 
     /// App. B's membrane holds a sample at its pressure: a 400-grain box consolidated at p,
     /// its side walls replaced by membranes at p and its top platen held, passes p to the

@@ -278,7 +278,7 @@ pub(super) fn continuum_run(
         transfer: Transfer::Apic,
         domain_walls: Some(Contact::Sticky),
         walls: Vec::new(),
-        loads_at_nodes: false,
+        point_loads: grains_mpm::pipeline::PointLoads::Weights,
         ambient_pressure: 0.0,
     };
     let mut pts = Points::<D2>::default();

@@ -7,7 +7,7 @@ use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
 use grains_mpm::constitutive::plasticity_drucker_prager::{DruckerPragerYue, InertialFriction};
 use grains_mpm::matrix::MpmSpace;
-use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, Transfer, cfl_time_step};
+use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, PointLoads, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, confine, seed};
 use grains_protocol::scene::{ContactForces, Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
 use grains_protocol::wire::Zone;
@@ -169,7 +169,11 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             MpmDomainWalls::Sticky => Contact::Sticky,
         }),
         walls,
-        loads_at_nodes: scene.coupling.contact_forces == ContactForces::Nodes,
+        point_loads: if scene.coupling.contact_forces == ContactForces::Nodes {
+            PointLoads::Nearest
+        } else {
+            PointLoads::Weights
+        },
         ambient_pressure: 0.0,
     };
     Ok((pts, params))
