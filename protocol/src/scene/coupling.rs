@@ -54,6 +54,10 @@ pub enum ContactForces {
     /// All on the grid node nearest the point (the paper's MPM-GRID scheme, kept to compare
     /// with: the force no longer follows the point within its cell).
     Nodes,
+    /// On the point's face towards the body, spread by the linear hat (a surface load as a
+    /// finite element takes it): the cells under the contact carry the whole force, where
+    /// through the weights part of it reaches nodes past them.
+    Faces,
 }
 
 /// What `coupling.substeps = "auto"` asks for: the DEM step `dem_dt` (the DEM's own stable
@@ -183,11 +187,12 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawCoupling>, cell_size: f64, dt:
         contact_forces: match c.contact_forces.as_ref().map(|t| (t, t.get_ref().as_str())) {
             None | Some((_, "points")) => ContactForces::Points,
             Some((_, "nodes")) => ContactForces::Nodes,
+            Some((_, "faces")) => ContactForces::Faces,
             Some((t, other)) => {
                 return Err(ctx.err(
                     Some(t.span()),
                     Some("coupling.contact_forces"),
-                    format!("must be \"points\" or \"nodes\", got {other:?}"),
+                    format!("must be \"points\", \"nodes\" or \"faces\", got {other:?}"),
                 ));
             }
         },
@@ -267,12 +272,14 @@ mod tests {
         assert_eq!(s.coupling.contact_forces, ContactForces::Points);
         let s = from_str(&hybrid("contact_forces = \"nodes\""), Path::new("h.toml"), 1).unwrap();
         assert_eq!(s.coupling.contact_forces, ContactForces::Nodes);
+        let s = from_str(&hybrid("contact_forces = \"faces\""), Path::new("h.toml"), 1).unwrap();
+        assert_eq!(s.coupling.contact_forces, ContactForces::Faces);
         let text = hybrid("contact_forces = \"grid\"");
         check_err(
             &text,
             Some(line_of(&text, "contact_forces")),
             "coupling.contact_forces",
-            "must be \"points\" or \"nodes\", got \"grid\"",
+            "must be \"points\", \"nodes\" or \"faces\", got \"grid\"",
         );
     }
 }

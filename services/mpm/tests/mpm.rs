@@ -732,7 +732,11 @@ fn a_point_load_acts_through_the_weights_or_on_the_nearest_node() {
         let p0: DVec2 = pts.v.iter().zip(&pts.mass).map(|(v, m)| *v * *m).sum();
         pipeline::<D2>().step(&mut pts, &params, dt).unwrap();
         let p1: DVec2 = pts.v.iter().zip(&pts.mass).map(|(v, m)| *v * *m).sum();
-        assert!((p1 - p0 - f * dt).length() < 1e-12 * (f * dt).length(), "{mode:?}: momentum {:?}", p1 - p0);
+        assert!(
+            (p1 - p0 - f * dt).length() < 1e-12 * (f * dt).length(),
+            "{mode:?}: momentum {:?}",
+            p1 - p0
+        );
         // Points outside the nearest node's support (|x − x_j| ≥ h + l_p along an axis).
         let outside: Vec<bool> = (0..pts.len())
             .map(|k| {

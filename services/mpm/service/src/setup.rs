@@ -169,10 +169,10 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             MpmDomainWalls::Sticky => Contact::Sticky,
         }),
         walls,
-        point_loads: if scene.coupling.contact_forces == ContactForces::Nodes {
-            PointLoads::Nearest
-        } else {
-            PointLoads::Weights
+        point_loads: match scene.coupling.contact_forces {
+            ContactForces::Points => PointLoads::Weights,
+            ContactForces::Nodes => PointLoads::Nearest,
+            ContactForces::Faces => PointLoads::Face,
         },
         ambient_pressure: 0.0,
     };
