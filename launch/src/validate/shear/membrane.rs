@@ -128,12 +128,15 @@ impl Membrane {
         inward / (2.0 * (0.5 * (y(n - 2) + y(n - 1)) - 0.5 * (y(0) + y(1))))
     }
 
-    /// The lateral stress the grains take from the membrane [Pa]: the normal force of their
-    /// contacts with both chains' free nodes (the elastic part, as the contacts are after a
-    /// step) over twice the height those nodes span. The end nodes are the platens'
+    /// The lateral stress the grains take from the membrane [Pa]: the net outward force of
+    /// their contacts on both chains' free nodes (the elastic part, as the contacts are after a
+    /// step), over twice the height those nodes span. The end nodes are the platens'
     /// (frozen, or driven with the top), so their contacts are the platens' reactions, not the
     /// pressure: counted, they added 1.9 and 1.3 points of p on two samples. The pressure acts over that height, so it is p unless
     /// the springs or the nodes' inertia carry some of the load, or a node left the sample.
+    /// Net, not each contact's |f_x|: a node in the valley between two boundary grains is
+    /// touched from above and below, and those contacts push it inward; summed as magnitudes
+    /// they read 0.8–2.4% over p in the biaxial (docs/validation.md).
     pub fn traction(&self, pipe: &DemPipeline<D2>, state: &DemState<D2>) -> f64 {
         let g = &state.grains;
         let n = self.chains[0].len() as u64;
@@ -142,7 +145,12 @@ impl Membrane {
             .contact_forces(state)
             .into_iter()
             .filter(|&(i, j, ..)| (g.id[i] >= MEMBRANE) != (g.id[j] >= MEMBRANE) && (free_node(i) || free_node(j)))
-            .map(|(_, _, f, _)| f.x.abs())
+            .map(|(i, j, f, _)| {
+                // The force on the node (f acts on i), outward: −x on the left chain.
+                let (node, on_node) = if g.id[i] >= MEMBRANE { (i, f) } else { (j, -f) };
+                let left = (g.id[node] - MEMBRANE) / CHAIN == 0;
+                if left { -on_node.x } else { on_node.x }
+            })
             .sum();
         // The free nodes take the pressure from the middle of the first segment to the middle
         // of the last (the halves at the ends would load the platens' nodes).
