@@ -415,7 +415,43 @@ hybrid_band = 0.003
         assert_eq!(f.zone_at([0.0201, 0.0021, 0.0]), Zone::Discrete);
         assert_eq!(f.zone_at([0.0201, 0.0041, 0.0]), Zone::Hybrid);
         assert_eq!(f.zone_at([0.0201, 0.0061, 0.0]), Zone::Continuum);
+        // The signed distance the field carries reads the base as the discrete layer: the
+        // height over the floor, less the base, plus the discrete layer (4 mm), less the band's
+        // middle (5.5 mm). The cell [4, 6] mm, centre 3.5 mm over the floor: on the band's
+        // middle; [2, 4], centre 1.5 mm over it: 2 mm on the discrete side.
+        let distance = |x: f64, y: f64| {
+            let c = f
+                .cells
+                .index([((x + 0.006) / 0.002).floor() as i64, ((y + 0.006) / 0.002).floor() as i64, 0]);
+            f.cells().iter().find(|z| Some(z.cell) == c).unwrap().distance
+        };
+        assert!(distance(0.0201, 0.0051).abs() < 1e-12, "{}", distance(0.0201, 0.0051));
+        assert!((distance(0.0201, 0.0031) + 0.002).abs() < 1e-12, "{}", distance(0.0201, 0.0031));
         // A ball rests on nothing: unchanged.
         assert_eq!(layered_zone(&s, &s.bodies[1], [0.071, 0.05, 0.0]), Zone::Continuum);
+    }
+
+    /// Across a periodic axis a box has no resting face: a layer spanning the domain's width
+    /// keeps its base over the floor only, where the same layer in a closed domain also lines
+    /// the domain's side faces it touches.
+    #[test]
+    fn a_discrete_base_skips_periodic_axes() {
+        let layer = SCENE
+            .replace("hybrid_band = 0.003\n", "hybrid_band = 0.003\ndiscrete_base = 0.002\n")
+            .replace(
+                "min = [0.0, 0.0015]\nmax = [0.04, 0.0815]",
+                "min = [-0.006, 0.0015]\nmax = [0.1, 0.0815]",
+            )
+            .replace("[[wall]]\nkind = \"plane\"\npoint = [0.0, 0.0]\nnormal = [1.0, 0.0]\n", "");
+        let periodic = layer.replace("cell_size = 0.002\n", "cell_size = 0.002\nperiodic = [true, false]\n");
+        assert_ne!(layer, periodic);
+        let (closed, open) = (scene_of(&layer), scene_of(&periodic));
+        assert!(open.domain.periodic[0] && closed.walls.len() == 1);
+        // 1 mm from the domain's left edge at mid-height, and over the floor.
+        let zone = |s: &Scene, x: f64, y: f64| layered_zone(s, &s.bodies[0], [x, y, 0.0]);
+        assert_eq!(zone(&closed, -0.005, 0.04), Zone::Discrete);
+        assert_eq!(zone(&open, -0.005, 0.04), Zone::Continuum);
+        assert_eq!(zone(&open, -0.005, 0.0025), Zone::Discrete);
+        assert_eq!(zone(&open, 0.05, 0.0075), Zone::Continuum);
     }
 }
