@@ -155,6 +155,19 @@ pub fn check_physics(scene: &Scene) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What a scene sets that its run will not use: an `[oracle]` table where no oracle starts
+/// (a run with no grains or no continuum; kept valid, since a hybrid scene run as a DEM or a
+/// continuum by `--set body.N.model=...` keeps its table).
+pub fn unused(scene: &Scene) -> Option<String> {
+    let oracle = scene.participants().contains(&Role::Oracle);
+    (scene.oracle.is_some() && !oracle).then(|| {
+        format!(
+            "{}: [oracle] is not used: this scene starts no oracle (it runs where grains meet a continuum: a hybrid body, or DEM and MPM bodies together)",
+            scene.path.display()
+        )
+    })
+}
+
 /// `grains check`: validates a scene file and the solvers' checks of it, and says what a
 /// run would start.
 pub fn check(path: &Path) -> anyhow::Result<()> {
@@ -164,6 +177,9 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
     }
     if s.synthetic.is_none() {
         check_physics(&s)?;
+    }
+    if let Some(note) = unused(&s) {
+        println!("{note}");
     }
     let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
     println!(
@@ -277,6 +293,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let roles = scene.participants();
     if scene.synthetic.is_none() {
         check_physics(&scene)?;
+    }
+    if let Some(note) = unused(&scene) {
+        tracing::warn!("{note}");
     }
     for e in &opts.external {
         if !roles.contains(e) {
@@ -432,4 +451,20 @@ struct RunCtx<'a> {
     resume: Option<&'a resume::Resumed>,
     /// The zenoh router's endpoint (`--transport zenoh`).
     zenoh: Option<&'a str>,
+}
+
+#[cfg(test)]
+mod tests {
+    /// A hybrid scene's `[oracle]` is used; the same scene run as a DEM keeps the table
+    /// (valid) but starts no oracle, and `unused` says so.
+    #[test]
+    fn an_oracle_table_without_an_oracle_is_reported() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/column_collapse_hybrid_2d.toml");
+        let (hybrid, ..) = super::steps::load(&path, &[]).unwrap();
+        assert!(hybrid.oracle.is_some());
+        assert_eq!(super::unused(&hybrid), None);
+        let (dem, ..) = super::steps::load(&path, &["body.0.model=\"dem\"".into()]).unwrap();
+        let note = super::unused(&dem).expect("a note");
+        assert!(note.contains("[oracle] is not used"), "{note}");
+    }
 }
