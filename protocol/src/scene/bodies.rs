@@ -42,8 +42,9 @@ pub struct Body {
     pub packing: Option<PathBuf>,
     /// Grains that never move but push (a rough base of glued grains). DEM bodies only.
     pub frozen: bool,
-    /// Confining pressure on the faces of a box of material points [Pa] (biaxial and triaxial
-    /// tests). MPM box bodies only.
+    /// Confining pressure on the free faces of a box of material points [Pa] (biaxial and
+    /// triaxial tests), as a fluid's (`MpmParams::ambient_pressure`): the same on every mpm
+    /// body of the scene. MPM box bodies only.
     pub confining_pressure: f64,
     /// Initial velocity of the body's grains and points [m/s].
     pub velocity: [f64; 3],

@@ -322,6 +322,27 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
     let gravity = run::gravity(ctx, dim, raw.gravity.as_ref())?;
     let materials = materials::validate(ctx, &raw.material)?;
     let bodies = bodies::validate(ctx, dim, &raw.body, &materials)?;
+    // A confining pressure is a fluid around all the continuum (`MpmParams::ambient_pressure`):
+    // every body with material points takes the same one.
+    let continuum = |b: &Body| matches!(b.model, Model::Mpm | Model::Hybrid);
+    if let Some(first) = bodies.iter().position(|b| b.confining_pressure > 0.0) {
+        let p = bodies[first].confining_pressure;
+        if let Some(k) = bodies.iter().position(|b| continuum(b) && b.confining_pressure != p) {
+            let span = raw.body[k]
+                .confining_pressure
+                .as_ref()
+                .map_or(raw.body[k].model.span(), |c| c.span());
+            return Err(ctx.err(
+                Some(span),
+                Some(&format!("body.{k}.confining_pressure")),
+                format!(
+                    "the confining pressure acts as a fluid around all the material points, so every mpm body takes the same: \
+                     body.{first} has {} Pa (a hybrid body cannot be confined)",
+                    crate::number(p)
+                ),
+            ));
+        }
+    }
     let walls = walls::validate(ctx, dim, &raw.wall)?;
     let rigids = rigid::validate(ctx, dim, &raw.rigid, &materials)?;
     let coupling = coupling::validate(ctx, raw.coupling.as_ref(), domain.cell_size, run.dt)?;
@@ -472,6 +493,36 @@ fn periodic_fits(ctx: &Ctx, raw: &raw::RawScene, scene: &Scene) -> Result<(), Sc
 mod tests {
     use super::testing::{DEM, GOOD, TempDir, check_err, edit};
     use super::*;
+
+    /// A confining pressure is a fluid around every body of material points: two mpm boxes
+    /// take the same, or the scene says which body differs and what the other has.
+    #[test]
+    fn a_confining_pressure_is_the_same_on_every_mpm_body() {
+        let box_at = |x: f64, p: &str| {
+            format!(
+                "[[body]]\nmaterial = \"m\"\nmodel = \"mpm\"\nshape = \"box\"\nmin = [{x}, 0.0]\nmax = [{}, 0.02]\n{p}",
+                x + 0.02
+            )
+        };
+        let scene = |a: &str, b: &str| {
+            format!(
+                "schema = 1\n[run]\ndimension = 2\ndt = 1e-5\nsteps = 1\n[domain]\nmin = [-0.01, -0.01]\nmax = [0.1, 0.1]\ncell_size = 0.002\n\
+                 [[material]]\nname = \"m\"\ndensity = 2500.0\n[material.mpm]\nyoung = 1e6\npoisson = 0.3\nfriction_angle = 20.0\npacking = 0.8\n{}{}",
+                box_at(0.0, a),
+                box_at(0.05, b)
+            )
+        };
+        let same = scene("confining_pressure = 1000.0\n", "confining_pressure = 1000.0\n");
+        let s = from_str(&same, std::path::Path::new("c.toml"), 1).unwrap();
+        assert!(s.bodies.iter().all(|b| b.confining_pressure == 1000.0));
+        let text = scene("confining_pressure = 1000.0\n", "confining_pressure = 500.0\n");
+        let line = text.lines().position(|l| l == "confining_pressure = 500.0").unwrap() + 1;
+        check_err(&text, Some(line), "body.1.confining_pressure", "body.0 has 1000 Pa");
+        // Unconfined, the second body is named at its model.
+        let text = scene("confining_pressure = 1000.0\n", "");
+        let line = text.lines().enumerate().filter(|(_, l)| l.starts_with("model")).nth(1).unwrap().0 + 1;
+        check_err(&text, Some(line), "body.1.confining_pressure", "every mpm body takes the same");
+    }
 
     #[test]
     fn a_good_synthetic_scene_validates() {

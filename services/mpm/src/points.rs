@@ -208,28 +208,6 @@ pub fn seed<S: Space>(region: Region, origin: [f64; 3], h: f64, per_axis: usize)
     out
 }
 
-/// A confining pressure on the faces of a box of points (those in `range`) (biaxial and triaxial tests): every point
-/// within one point spacing `d` of a face carries the dead load −p A n (A = d^(d−1), n the outward
-/// normal of the face), fixed in direction (small rotations of the faces assumed).
-pub fn confine<S: MpmSpace>(pts: &mut Points<S>, range: std::ops::Range<usize>, min: [f64; 3], max: [f64; 3], spacing: f64, pressure: f64) {
-    let area = spacing.powi(S::DIM as i32 - 1);
-    for p in range {
-        let x = S::to_array(pts.x[p]);
-        let mut f = [0.0; 3];
-        for k in 0..S::DIM {
-            if x[k] - min[k] < spacing {
-                f[k] += pressure * area;
-            }
-            if max[k] - x[k] < spacing {
-                f[k] -= pressure * area;
-            }
-        }
-        if f != [0.0; 3] {
-            pts.loads.push((p, S::from_array(f)));
-        }
-    }
-}
-
 /// Kinetic energy [J] and momentum of the points, with their masses scaled by their hybrid
 /// weights (the share of the material the continuum carries, as the DEM scales its grains).
 pub fn totals<S: MpmSpace>(pts: &Points<S>) -> (f64, S::V) {

@@ -542,40 +542,88 @@ fn hybrid_weight_scales_the_mass_on_the_grid() {
     assert!((p_grid - DVec2::new(0.5, 1.0) * m_pts).length() < 1e-12 * m_pts);
 }
 
-/// A confining pressure p on the faces of a free elastic block (no gravity, PIC damping the
-/// ringing) compresses it isotropically: at rest its interior pressure is p (force balance of a
-/// uniformly loaded body), within 3% (the load is spread over the boundary layer of points).
+/// The other way to confine a box of points (those in `range`), kept to compare: every point
+/// within one point spacing `d` of a face carries the dead load −p A n (A = d^(d−1), n the outward
+/// normal of the face), fixed in direction (small rotations of the faces assumed).
+fn confine<S: MpmSpace>(
+    pts: &mut grains_mpm::points::Points<S>,
+    range: std::ops::Range<usize>,
+    min: [f64; 3],
+    max: [f64; 3],
+    spacing: f64,
+    pressure: f64,
+) {
+    let area = spacing.powi(S::DIM as i32 - 1);
+    for p in range {
+        let x = S::to_array(pts.x[p]);
+        let mut f = [0.0; 3];
+        for k in 0..S::DIM {
+            if x[k] - min[k] < spacing {
+                f[k] += pressure * area;
+            }
+            if max[k] - x[k] < spacing {
+                f[k] -= pressure * area;
+            }
+        }
+        if f != [0.0; 3] {
+            pts.loads.push((p, S::from_array(f)));
+        }
+    }
+}
+
+/// A confining fluid at p around a free elastic block from rest at no stress (no gravity, PIC
+/// damping the ringing: the scene's `confining_pressure`, `MpmParams::ambient_pressure`)
+/// compresses it isotropically: at rest its interior pressure is p (force balance of a
+/// uniformly loaded body), within 0.5% (measured 0.06% under). Printed, not asserted: the
+/// outer ring of points, 10% over p (not explained: a block started at −p I keeps p on every
+/// point, `an_ambient_pressure_holds_a_block_at_its_stress`), and the same block with the
+/// pressure as point loads on the outer ring ([`confine`], the scene's way until 2026-12-05):
+/// interior 1.2% over, ring 17% under.
 #[test]
 fn a_confining_pressure_is_carried_by_the_interior() {
-    use grains_mpm::points::confine;
     let (h, density, pressure) = (0.02, 1000.0, 2e4);
     let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], h, 2);
     let (lo, hi) = ([0.3, 0.3], [0.7, 0.7]);
-    let mut pts = block(lo, hi, h, 2, density);
-    let n = pts.len();
-    confine(&mut pts, 0..n, [lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0], 0.5 * h, pressure);
-    assert_eq!(pts.loads.len(), 4 * 40 - 4, "the outer ring of 40 × 40 points");
-    let mut p = params(grid, h, 2, DruckerPragerYue::new(2e6, 0.3, 30.0, 2));
-    p.transfer = Transfer::Flip(0.0);
-    let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
-    let mut pipe = pipeline::<D2>();
-    for _ in 0..4000 {
-        pipe.step(&mut pts, &p, dt).unwrap();
-    }
-    // At rest: kinetic energy below 1e-6 of the stored elastic energy p² A / (2κ).
-    let (ke, _) = point_totals(&pts);
-    let elastic = pressure * pressure * 0.16 / (2.0 * DruckerPragerYue::new(2e6, 0.3, 30.0, 2).bulk);
-    assert!(ke < 1e-6 * elastic, "not at rest: {ke} J");
     let center = DVec2::new(0.5, 0.5);
-    let inner: Vec<f64> = (0..pts.len())
-        .filter(|&k| (pts.x[k] - center).abs().max_element() < 0.1)
-        .map(|k| Model::pressure(&pts.tau[k], pts.jacobian[k]))
-        .collect();
-    let mean = inner.iter().sum::<f64>() / inner.len() as f64;
-    eprintln!("interior pressure {mean:.1} Pa under a confining {pressure} Pa");
+    let mut results = Vec::new();
+    for fluid in [true, false] {
+        let mut pts = block(lo, hi, h, 2, density);
+        let n = pts.len();
+        let mut p = params(grid, h, 2, DruckerPragerYue::new(2e6, 0.3, 30.0, 2));
+        if fluid {
+            p.ambient_pressure = pressure;
+        } else {
+            confine(&mut pts, 0..n, [lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0], 0.5 * h, pressure);
+            assert_eq!(pts.loads.len(), 4 * 40 - 4, "the outer ring of 40 × 40 points");
+        }
+        p.transfer = Transfer::Flip(0.0);
+        let dt = 0.3 * cfl_time_step(&p.model, density, h, 2);
+        let mut pipe = pipeline::<D2>();
+        for _ in 0..4000 {
+            pipe.step(&mut pts, &p, dt).unwrap();
+        }
+        // At rest: kinetic energy below 1e-6 of the stored elastic energy p² A / (2κ).
+        let (ke, _) = point_totals(&pts);
+        let elastic = pressure * pressure * 0.16 / (2.0 * DruckerPragerYue::new(2e6, 0.3, 30.0, 2).bulk);
+        assert!(ke < 1e-6 * elastic, "not at rest: {ke} J");
+        let mean_of = |keep: &dyn Fn(f64) -> bool| {
+            let ps: Vec<f64> = (0..pts.len())
+                .filter(|&k| keep((pts.x[k] - center).abs().max_element()))
+                .map(|k| Model::pressure(&pts.tau[k], pts.jacobian[k]))
+                .collect();
+            ps.iter().sum::<f64>() / ps.len() as f64
+        };
+        let (inner, ring) = (mean_of(&|r| r < 0.1), mean_of(&|r| r > 0.19));
+        eprintln!(
+            "{}: interior pressure {inner:.1} Pa, outer ring {ring:.1} Pa under a confining {pressure} Pa",
+            if fluid { "fluid" } else { "point loads" }
+        );
+        results.push((inner, ring));
+    }
+    let inner = results[0].0;
     assert!(
-        (mean - pressure).abs() < 0.03 * pressure,
-        "interior pressure {mean} Pa vs {pressure} Pa"
+        (inner - pressure).abs() < 0.005 * pressure,
+        "interior pressure {inner} Pa vs {pressure} Pa"
     );
 }
 
@@ -589,7 +637,6 @@ fn a_confining_pressure_is_carried_by_the_interior() {
 fn an_ambient_pressure_holds_a_block_at_its_stress() {
     use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
     use grains_mpm::matrix::Matrix;
-    use grains_mpm::points::confine;
     let (h, density, pressure) = (0.02, 1000.0, 2e4);
     let grid = Grid::covering([0.0; 3], [1.0, 1.0, 0.0], h, 2);
     let (lo, hi) = ([0.3, 0.3], [0.7, 0.7]);

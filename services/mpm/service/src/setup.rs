@@ -8,7 +8,7 @@ use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
 use grains_mpm::constitutive::plasticity_drucker_prager::{DruckerPragerYue, InertialFriction};
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, PointLoads, Transfer, cfl_time_step};
-use grains_mpm::points::{Points, Region, confine, seed};
+use grains_mpm::points::{Points, Region, seed};
 use grains_protocol::scene::{ContactForces, Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
 use grains_protocol::wire::Zone;
 use grains_service::zones::ZoneField;
@@ -174,7 +174,8 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
             ContactForces::Nodes => PointLoads::Nearest,
             ContactForces::Faces => PointLoads::Face,
         },
-        ambient_pressure: 0.0,
+        // The scene's confining pressure, the same on every continuum body (the scene checks).
+        ambient_pressure: scene.bodies.iter().map(|b| b.confining_pressure).fold(0.0, f64::max),
     };
     Ok((pts, params))
 }
@@ -262,7 +263,6 @@ fn seed_points<S: MpmSpace>(
             Shape::Box { min, max } => Region::Box { min, max },
             Shape::Ball { center, radius } => Region::Ball { center, radius },
         };
-        let first = pts.len();
         // Points behind a wall (a box body cut by a drum's circle) are not seeded.
         for x in seed::<S>(region, grid.origin, h, per_axis)
             .into_iter()
@@ -280,12 +280,6 @@ fn seed_points<S: MpmSpace>(
             pts.push(x, rho * volume, volume, packing);
             *pts.weight.last_mut().expect("just pushed") = weight;
             *pts.v.last_mut().expect("just pushed") = S::from_array(body.velocity);
-        }
-        if body.confining_pressure > 0.0
-            && let Shape::Box { min, max } = body.shape
-        {
-            let all = first..pts.len();
-            confine(&mut pts, all, min, max, spacing, body.confining_pressure);
         }
     }
     pts
