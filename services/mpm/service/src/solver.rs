@@ -176,16 +176,17 @@ impl<S: MpmSpace> MpmSolver<S> {
 }
 
 /// 100 × (initial kinetic energy + the work gravity can do across the domain + the kinetic
-/// energy of all the material at the fastest wall's speed): a run that exceeds it is blowing up,
-/// not flowing.
+/// energy of all the material at the fastest wall's speed + the work of the point loads across
+/// the domain and of the confining fluid squeezing the material to nothing, p V): a run that
+/// exceeds it is blowing up, not flowing.
 fn runaway_bound<S: MpmSpace>(extent: f64, pts: &Points<S>, params: &MpmParams<S>) -> f64 {
     let mass: f64 = pts.mass.iter().sum();
     let g = params.gravity.length();
     let wall_speed = params.walls.iter().map(|w| w.velocity.length()).fold(0.0, f64::max);
-    // Confining loads can accelerate the whole body across the domain at most.
     let loads: f64 = pts.loads.iter().map(|(_, f)| f.length()).sum::<f64>() * extent;
+    let fluid = params.ambient_pressure * pts.volume.iter().sum::<f64>();
     let (ke, _) = totals(pts);
-    100.0 * (ke + mass * g * extent + 0.5 * mass * wall_speed * wall_speed + loads).max(f64::MIN_POSITIVE)
+    100.0 * (ke + mass * g * extent + 0.5 * mass * wall_speed * wall_speed + loads + fluid).max(f64::MIN_POSITIVE)
 }
 
 /// An upper bound of the energy the scene's rigid bodies can give the points [J]: a moving

@@ -116,3 +116,29 @@ fn contact_forces_act_on_points_sent_for_one_step_only() {
     m.step_alone(&StepWindow::of(&s, 1)).unwrap();
     assert_eq!(m.points.loads.len(), dead, "the contact forces acted for one step");
 }
+
+/// A free box in a confining fluid (`confining_pressure`, the MPM's ambient pressure), started
+/// at no stress: the fluid squeezes it, which the runaway bound must allow (its work p V is in
+/// the bound; without it the bound was 100 × the box's zero kinetic energy and the first step
+/// stopped the run), and at rest (PIC damps the ringing) its middle carries the fluid's
+/// pressure within 1% (force balance of a uniformly loaded body).
+#[test]
+fn a_confined_box_is_squeezed_without_a_runaway() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../tests/scenes/mpm_confined_2d.toml");
+    let s = scene::load(&path).expect("test scene");
+    let mut mpm = solver(&s);
+    assert_eq!(mpm.params.ambient_pressure, 1000.0);
+    assert!(mpm.points.loads.is_empty(), "no dead loads: the fluid");
+    for step in 1..=s.steps {
+        mpm.step_alone(&StepWindow::of(&s, step)).unwrap();
+    }
+    let p = &mpm.points;
+    let middle: Vec<f64> = (0..p.len())
+        .filter(|&k| (p.x[k].x - 0.01).abs() < 0.004 && (p.x[k].y - 0.01).abs() < 0.004)
+        .map(|k| grains_mpm::pipeline::Model::pressure(&p.tau[k], p.jacobian[k]))
+        .collect();
+    let mean = middle.iter().sum::<f64>() / middle.len() as f64;
+    let speed = p.v.iter().map(|v| v.length()).fold(0.0, f64::max);
+    eprintln!("at the end: the middle's pressure {mean:.1} Pa, the fastest point {speed:.2e} m/s");
+    assert!((mean / 1000.0 - 1.0).abs() < 0.01, "the middle's pressure {mean:.1} Pa");
+}
