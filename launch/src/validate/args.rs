@@ -114,9 +114,23 @@ pub struct ValidateArgs {
     /// the saved position; spin from the contacts).
     #[arg(long = "shear-transfer", value_delimiter = ',', default_value = "pic,flip")]
     pub shear_transfers: Vec<String>,
+    /// What holds the DEM biaxial sample's sides at the confining pressure (`--part
+    /// biaxial`): `membrane` (Chen 2021 App. B, the paper's) or `fluid` (the pressure on the
+    /// packing's surface as the MPM's confining fluid takes it: `grains_dem::fluid`).
+    #[arg(long = "biaxial-confinement", value_enum, default_value = "membrane")]
+    pub biaxial_confinement: Confinement,
     /// Parts to run (default all; `--quick`: those of the CI subset, each in its quick form).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub part: Vec<PartName>,
+}
+
+/// What holds a DEM sample's sides at a pressure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Confinement {
+    /// Chains of mass–spring nodes among the grains (Chen 2021 App. B).
+    Membrane,
+    /// The pressure of a fluid on the packing's surface, on a grid (`grains_dem::fluid`).
+    Fluid,
 }
 
 impl ValidateArgs {

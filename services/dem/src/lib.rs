@@ -12,6 +12,7 @@
 //! - [`packing`]: initial placements (seeded jittered lattices; the radii are drawn with
 //!   `grains_grid::rng`);
 //! - [`coupling`]: the kernels of the DEM side of the grid-vs-grid coupling (Yue 2018 Alg. 4–5);
+//! - [`fluid`]: a confining fluid's pressure on a packing's surface, on a grid as the MPM's;
 //! - [`training`]: kinematic training of a packing through a continuum's deformation history
 //!   by its boundary (Chen 2021 §4.1.1);
 //! - [`coupled`]: the DEM half of a coupled macro-step over them (Alg. 2, 4–6), split at the
@@ -23,6 +24,7 @@ pub mod bodies;
 pub mod contact;
 pub mod coupled;
 pub mod coupling;
+pub mod fluid;
 pub mod neighbors;
 pub mod packing;
 pub mod pipeline;

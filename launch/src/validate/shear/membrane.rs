@@ -200,3 +200,100 @@ pub(super) fn plane_point(state: &DemState<D2>, k: usize) -> <D2 as Space>::V {
         _ => unreachable!("a box sample's walls are planes"),
     }
 }
+
+/// What holds a box sample's sides (walls 0 and 1 of `box_sample`, replaced) at the pressure:
+/// App. B's membrane, or a fluid on the packing's surface ([`grains_dem::fluid`]).
+pub(super) enum Sides {
+    Membrane(Membrane),
+    Fluid(grains_dem::fluid::Fluid),
+}
+
+impl Sides {
+    /// Replaces the side walls by `kind` at `pressure`; the fluid's grid has cells of two
+    /// diameters and takes the sample's `packing` fraction.
+    pub fn wrap(
+        kind: crate::validate::args::Confinement,
+        state: &mut DemState<D2>,
+        pressure: f64,
+        diameter: f64,
+        density: f64,
+        packing: f64,
+    ) -> Sides {
+        match kind {
+            crate::validate::args::Confinement::Membrane => Sides::Membrane(Membrane::wrap(state, pressure, diameter, density)),
+            crate::validate::args::Confinement::Fluid => {
+                state.walls.drain(0..2);
+                Sides::Fluid(grains_dem::fluid::Fluid {
+                    pressure,
+                    cell: 2.0 * diameter,
+                    packing,
+                })
+            }
+        }
+    }
+
+    /// Loads the grains (the membrane's nodes, or the fluid's forces on every grain) before a
+    /// step of dt.
+    pub fn load(&self, state: &mut DemState<D2>, dt: f64) {
+        match self {
+            Sides::Membrane(m) => m.load(state, dt),
+            Sides::Fluid(f) => {
+                let (forces, _) = grains_dem::fluid::forces(&state.grains, f);
+                state.grains.external = forces;
+            }
+        }
+    }
+
+    /// The area the sides enclose [m²]: the chains' polygon; under the fluid, the grains'
+    /// outer faces in horizontal slabs of a fluid cell (the extent of the grains in each, over
+    /// its height). Not the fluid's own ∫ c dA: that moves by ±1% of the area as the top
+    /// crosses the fluid's cells (a period of 2 D50 in the first run, `/tmp/vb_fluid`).
+    pub fn area(&self, state: &DemState<D2>) -> f64 {
+        match self {
+            Sides::Membrane(m) => m.area(state),
+            Sides::Fluid(f) => {
+                let g = &state.grains;
+                let (lo, hi) = (0..g.len()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), i| {
+                    (lo.min(g.x[i].y - g.radius[i]), hi.max(g.x[i].y + g.radius[i]))
+                });
+                let slabs = ((hi - lo) / f.cell).ceil().max(1.0) as usize;
+                let dy = (hi - lo) / slabs as f64;
+                let mut extent = vec![(f64::INFINITY, f64::NEG_INFINITY); slabs];
+                for i in 0..g.len() {
+                    let k = (((g.x[i].y - lo) / dy) as usize).min(slabs - 1);
+                    extent[k].0 = extent[k].0.min(g.x[i].x - g.radius[i]);
+                    extent[k].1 = extent[k].1.max(g.x[i].x + g.radius[i]);
+                }
+                extent.iter().filter(|e| e.1 > e.0).map(|e| (e.1 - e.0) * dy).sum()
+            }
+        }
+    }
+
+    /// The part of the axial stress σ1 the top platen does not carry: the fluid pushes the
+    /// top grains down as well (the MPM's fluid does the same); the membrane ends at the
+    /// platens.
+    pub fn on_top(&self) -> f64 {
+        match self {
+            Sides::Membrane(_) => 0.0,
+            Sides::Fluid(f) => f.pressure,
+        }
+    }
+
+    /// The lateral stress the grains take from the sides and the springs' net pull, over the
+    /// pressure ([`Membrane::traction`], [`Membrane::pull`]); the fluid's is its net inward
+    /// force on each half of the sample over twice the height between the platens (walls 0
+    /// and 1 after the wrap), and it pulls nothing.
+    pub fn lateral(&self, pipe: &DemPipeline<D2>, state: &DemState<D2>) -> (f64, f64) {
+        match self {
+            Sides::Membrane(m) => (m.traction(pipe, state) / m.pressure, m.pull(state) / m.pressure),
+            Sides::Fluid(f) => {
+                let g = &state.grains;
+                let (forces, _) = grains_dem::fluid::forces(g, f);
+                let mid = g.x.iter().map(|x| x.x).sum::<f64>() / g.len() as f64;
+                let push: f64 = (0..g.len()).map(|i| if g.x[i].x > mid { -forces[i].x } else { forces[i].x }).sum();
+                let height = plane_point(state, 1).y - plane_point(state, 0).y;
+                (push / (2.0 * height) / f.pressure, 0.0)
+            }
+        }
+    }
+}
