@@ -364,7 +364,7 @@ pub(in crate::validate) fn validate(args: &super::ValidateArgs) -> anyhow::Resul
          grains'; nearer, the strain is the membrane's and the platens'), \
          its inclination the least-squares line through App. A's grains; the profile of the incremental strain across that \
          line in {}-D50 slabs. One run per seed (the samples differ in their lattice's jitter and radii).\n\n\
-         | seed | t_s (App. A) | profile across the band at half peak | grains counted | band's inclination from horizontal | peak φ (axial strain), ψ after it | φ, ψ over the window | the membrane's traction over the window / p (the springs' net pull) | wall |\n\
+         | seed | t_s (App. A) | profile across the band at half peak | grains counted | band's inclination from horizontal | peak φ (axial strain), ψ after it | φ, ψ over the window | the sides' push over the window / p (the membrane's springs' net pull) | wall |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         r.grains,
         r.width / d,
