@@ -115,9 +115,11 @@ pub struct ValidateArgs {
     #[arg(long = "shear-transfer", value_delimiter = ',', default_value = "pic,flip")]
     pub shear_transfers: Vec<String>,
     /// What holds the DEM biaxial sample's sides at the confining pressure (`--part
-    /// biaxial`): `membrane` (Chen 2021 App. B, the paper's) or `fluid` (the pressure on the
-    /// packing's surface as the MPM's confining fluid takes it: `grains_dem::fluid`).
-    #[arg(long = "biaxial-confinement", value_enum, default_value = "membrane")]
+    /// biaxial`): `fluid` (the pressure on the packing's surface on a grid, as the MPM's
+    /// confining fluid takes it: `grains_dem::fluid`; Chen 2021 App. B's membrane also acts
+    /// on the grains through the background grid) or `membrane` (a chain of spring nodes in
+    /// contact with the grains: App. B's springs, our discretisation).
+    #[arg(long = "biaxial-confinement", value_enum, default_value = "fluid")]
     pub biaxial_confinement: Confinement,
     /// Parts to run (default all; `--quick`: those of the CI subset, each in its quick form).
     #[arg(long, value_enum, value_delimiter = ',')]
