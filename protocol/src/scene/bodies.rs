@@ -42,9 +42,10 @@ pub struct Body {
     pub packing: Option<PathBuf>,
     /// Grains that never move but push (a rough base of glued grains). DEM bodies only.
     pub frozen: bool,
-    /// Confining pressure on the free faces of a box of material points [Pa] (biaxial and
-    /// triaxial tests), as a fluid's (`MpmParams::ambient_pressure`): the same on every mpm
-    /// body of the scene. MPM box bodies only.
+    /// Confining pressure on the free faces of a box body [Pa] (biaxial and triaxial tests),
+    /// as a fluid's: on material points `MpmParams::ambient_pressure`, on grains
+    /// `grains_dem::fluid`. The same on every body of the scene that is not frozen. MPM and
+    /// DEM box bodies only.
     pub confining_pressure: f64,
     /// Initial velocity of the body's grains and points [m/s].
     pub velocity: [f64; 3],
@@ -78,11 +79,13 @@ fn body(ctx: &Ctx, dim: usize, b: &RawBody, materials: &[Material], f: &dyn Fn(&
     let frozen = b.frozen.as_ref().is_some_and(|fz| *fz.get_ref());
     let confining_pressure = match &b.confining_pressure {
         None => 0.0,
-        Some(p) if model != Model::Mpm || !matches!(shape, Shape::Box { .. }) => {
+        Some(p) if !matches!(model, Model::Mpm | Model::Dem) || !matches!(shape, Shape::Box { .. }) || frozen => {
             return Err(ctx.err(
                 Some(p.span()),
                 Some(&f("confining_pressure")),
-                "only a model = \"mpm\" body of shape \"box\" can be confined".into(),
+                "only a model = \"mpm\" or \"dem\" body of shape \"box\" that is not frozen can be confined (a hybrid body's \
+                 grains and points do not share a fluid yet; a frozen body is a wall)"
+                    .into(),
             ));
         }
         Some(p) => in_range(ctx, p, &f("confining_pressure"), Closed(0.0), Bound::None)?,

@@ -322,12 +322,12 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
     let gravity = run::gravity(ctx, dim, raw.gravity.as_ref())?;
     let materials = materials::validate(ctx, &raw.material)?;
     let bodies = bodies::validate(ctx, dim, &raw.body, &materials)?;
-    // A confining pressure is a fluid around all the continuum (`MpmParams::ambient_pressure`):
-    // every body with material points takes the same one.
-    let continuum = |b: &Body| matches!(b.model, Model::Mpm | Model::Hybrid);
+    // A confining pressure is one fluid around all the material that moves
+    // (`MpmParams::ambient_pressure` on points, `grains_dem::fluid` on grains): every body that
+    // is not frozen takes the same one.
     if let Some(first) = bodies.iter().position(|b| b.confining_pressure > 0.0) {
         let p = bodies[first].confining_pressure;
-        if let Some(k) = bodies.iter().position(|b| continuum(b) && b.confining_pressure != p) {
+        if let Some(k) = bodies.iter().position(|b| !b.frozen && b.confining_pressure != p) {
             let span = raw.body[k]
                 .confining_pressure
                 .as_ref()
@@ -336,8 +336,8 @@ fn validate(ctx: &Ctx, raw: raw::RawScene, hash: u64) -> Result<Scene, SceneErro
                 Some(span),
                 Some(&format!("body.{k}.confining_pressure")),
                 format!(
-                    "the confining pressure acts as a fluid around all the material points, so every mpm body takes the same: \
-                     body.{first} has {} Pa (a hybrid body cannot be confined)",
+                    "the confining pressure acts as one fluid around all the material that moves, so every body that is not \
+                     frozen takes the same: body.{first} has {} Pa (a hybrid body cannot be confined)",
                     crate::number(p)
                 ),
             ));
@@ -521,7 +521,44 @@ mod tests {
         // Unconfined, the second body is named at its model.
         let text = scene("confining_pressure = 1000.0\n", "");
         let line = text.lines().enumerate().filter(|(_, l)| l.starts_with("model")).nth(1).unwrap().0 + 1;
-        check_err(&text, Some(line), "body.1.confining_pressure", "every mpm body takes the same");
+        check_err(
+            &text,
+            Some(line),
+            "body.1.confining_pressure",
+            "every body that is not frozen takes the same",
+        );
+    }
+
+    /// Grains can be confined too (`grains_dem::fluid`): a DEM box takes the pressure, a frozen
+    /// DEM body (a wall) needs none beside a confined one and cannot take one.
+    #[test]
+    fn a_dem_box_can_be_confined_and_a_frozen_one_cannot() {
+        let scene = |bodies: &str| {
+            format!(
+                "schema = 1\n[run]\ndimension = 2\ndt = 1e-5\nsteps = 1\n[domain]\nmin = [-0.01, -0.01]\nmax = [0.1, 0.1]\ncell_size = 0.002\n\
+                 [[material]]\nname = \"g\"\ndensity = 2500.0\n[material.dem]\nradius = 5e-4\nstiffness_normal = 1e6\nfriction = 0.5\nrestitution = 0.5\n\
+                 [[body]]\nmaterial = \"g\"\nmodel = \"dem\"\nshape = \"box\"\nmin = [0.0, 0.002]\nmax = [0.02, 0.04]\n\
+                 confining_pressure = 1000.0\n{bodies}"
+            )
+        };
+        let floor = |p: &str| {
+            format!(
+                "[[body]]\nmaterial = \"g\"\nmodel = \"dem\"\nshape = \"box\"\nmin = [0.0, 0.0]\nmax = [0.02, 0.002]\nfrozen = true\n{p}"
+            )
+        };
+        let s = from_str(&scene(&floor("")), std::path::Path::new("c.toml"), 1).unwrap();
+        assert_eq!(s.bodies[0].confining_pressure, 1000.0);
+        assert_eq!(s.bodies[1].confining_pressure, 0.0);
+        let text = scene(&floor("confining_pressure = 1000.0\n"));
+        let line = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| l.starts_with("confining_pressure"))
+            .nth(1)
+            .unwrap()
+            .0
+            + 1;
+        check_err(&text, Some(line), "body.1.confining_pressure", "not frozen can be confined");
     }
 
     #[test]

@@ -41,6 +41,48 @@ pub struct DemSolver<S: Space> {
     point_contacts: grains_dem::bodies::BodyContacts,
     /// `bodies.csv`: per macro-step, each rigid body's pose and the force and torque on it.
     bodies_log: Option<StepLog>,
+    /// The scene's confining pressure on the grains (`grains_dem::fluid`), set as their
+    /// external load at the start of every macro-step and held over its substeps.
+    fluid: Option<grains_dem::fluid::Fluid>,
+}
+
+/// The fluid of a scene whose DEM bodies are confined: its pressure, a grid of two of the
+/// largest grain's diameters (the ramp needs a few grains per node) and the packing fraction
+/// of the grains that move in the confined boxes; with the work p V the fluid can do on them
+/// (V the boxes' volume), for the runaway bound.
+fn fluid<S: Space>(scene: &Scene, state: &DemState<S>) -> Option<(grains_dem::fluid::Fluid, f64)> {
+    use grains_protocol::scene::Shape;
+    let confined: Vec<_> = scene
+        .bodies
+        .iter()
+        .filter(|b| b.model == Model::Dem && b.confining_pressure > 0.0)
+        .collect();
+    let first = confined.first()?;
+    let dim = S::DIM;
+    let volume: f64 = confined
+        .iter()
+        .map(|b| match b.shape {
+            Shape::Box { min, max } => (0..dim).map(|k| max[k] - min[k]).product::<f64>(),
+            Shape::Ball { .. } => 0.0,
+        })
+        .sum();
+    let g = &state.grains;
+    let moving = (0..g.len()).filter(|&i| !g.frozen[i]);
+    let ball = |r: f64| {
+        if dim == 2 {
+            std::f64::consts::PI * r * r
+        } else {
+            4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
+        }
+    };
+    let solid: f64 = moving.clone().map(|i| ball(g.radius[i])).sum();
+    let largest = moving.map(|i| g.radius[i]).fold(0.0, f64::max);
+    let fluid = grains_dem::fluid::Fluid {
+        pressure: first.confining_pressure,
+        cell: 4.0 * largest,
+        packing: (solid / volume).clamp(0.1, 1.0),
+    };
+    Some((fluid, fluid.pressure * volume))
 }
 
 /// What a checkpoint holds of the DEM (see [`Solver::save`]).
@@ -61,7 +103,14 @@ impl<S: Space> DemSolver<S> {
         let pipeline = DemPipeline::new(scene.threads as usize)?;
         let extent = grains_service::grid::scene_extent(scene);
         let continuum = if scene.contact_coupling() { continuum(scene) } else { (0.0, 0.0) };
-        let energy_bound = runaway_bound(extent, S::from_array(scene.gravity).length(), &state, continuum);
+        let fluid = fluid(scene, &state);
+        let work = fluid.map_or(0.0, |f| f.1);
+        let energy_bound = runaway_bound(
+            extent,
+            S::from_array(scene.gravity).length(),
+            &state,
+            (continuum.0, continuum.1 + work),
+        );
         let (grid, kernel) = grains_service::grid::scene_grid(scene);
         let frames = match out_dir {
             Some(dir) if scene.output.frames_every > 0 => Some(FrameWriter::new(dir, resume, &state)?),
@@ -125,6 +174,7 @@ impl<S: Space> DemSolver<S> {
             resumed: resume,
             point_contacts: Default::default(),
             bodies_log,
+            fluid: fluid.map(|f| f.0),
         };
         if let Some((f, _)) = &mut solver.frames
             && resume.is_none()
@@ -132,6 +182,14 @@ impl<S: Space> DemSolver<S> {
             f.write(0, &solver.state, &solver.pipeline)?;
         }
         Ok(solver)
+    }
+
+    /// The confining fluid's load on every grain, for the macro-step about to run (the
+    /// scene admits no hybrid body beside it, so no coupling load shares `external`).
+    fn confine(&mut self) {
+        if let Some(f) = &self.fluid {
+            self.state.grains.external = grains_dem::fluid::forces(&self.state.grains, f).0;
+        }
     }
 
     /// NaN and runaway energy, with the step and the likely cause.
@@ -235,6 +293,7 @@ impl<S: Space> Solver for DemSolver<S> {
     /// [`CoupledStep::advance`], the NaN and runaway checks, [`CoupledStep::rasterize`].
     fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize> {
         let substeps = substeps(window)?;
+        self.confine();
         self.coupled.advance(&mut self.state, &mut self.pipeline, window.dt, substeps);
         self.check(window.step, window.dt / substeps as f64)?;
         Ok(self.coupled.rasterize(&self.state, window.dt).len())
@@ -263,6 +322,7 @@ impl<S: Space> Solver for DemSolver<S> {
     fn step_alone(&mut self, window: &StepWindow) -> anyhow::Result<()> {
         let substeps = substeps(window)?;
         let dt = window.dt / substeps as f64;
+        self.confine();
         self.pipeline.run(&mut self.state, dt, substeps);
         self.check(window.step, dt)?;
         self.after_step(window)
