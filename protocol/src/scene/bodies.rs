@@ -83,8 +83,9 @@ fn body(ctx: &Ctx, dim: usize, b: &RawBody, materials: &[Material], f: &dyn Fn(&
             return Err(ctx.err(
                 Some(p.span()),
                 Some(&f("confining_pressure")),
-                "only a model = \"mpm\" or \"dem\" body of shape \"box\" that is not frozen can be confined (a hybrid body's \
-                 grains and points do not share a fluid yet; a frozen body is a wall)"
+                "only a model = \"mpm\" or \"dem\" body of shape \"box\" that is not frozen can be confined (a frozen body is a \
+                 wall; a hybrid body's grains and points each take the fluid, but together they give its core 1.11 p, not p: \
+                 not validated, docs/validation.md)"
                     .into(),
             ));
         }

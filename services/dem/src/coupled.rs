@@ -56,6 +56,10 @@ pub struct CouplingParams {
     pub quasi_static: f64,
     /// |g| [m/s²] of that inertial number, I² = γ̇² d / |g|.
     pub gravity: f64,
+    /// A confining fluid around the material ([`crate::fluid`]): its load on every grain is
+    /// set at the start of each step and held over the substeps, the hybrid grains' at their
+    /// scale (the points take the rest of a shared cell's, at their weight).
+    pub fluid: Option<crate::fluid::Fluid>,
 }
 
 /// The DEM half of a coupled macro-step: its parameters and the scratch of one step.
@@ -78,6 +82,9 @@ pub struct CoupledStep<S: Space> {
     /// With [`GrainTransfer::Flip`]: each constrained node's coupling acceleration of the last
     /// step [m/s²], sorted by node.
     accel: Vec<(u64, S::V)>,
+    /// With [`GrainTransfer::Flip`]: the coupling's push on each hybrid grain this step (of
+    /// their `external` load, the part the coupler must not see; the fluid's it must).
+    push: Vec<S::V>,
 }
 
 /// The value of `node` in a node-sorted list.
@@ -95,6 +102,7 @@ impl<S: Space> CoupledStep<S> {
             raster: Vec::new(),
             carried: Vec::new(),
             accel: Vec::new(),
+            push: Vec::new(),
         }
     }
 
@@ -135,6 +143,10 @@ impl<S: Space> CoupledStep<S> {
         self.saved.clear();
         self.saved.extend(self.hybrid.iter().map(|&i| g.x[i as usize]));
         self.stencils.build(grid, kernel, &self.saved);
+        if let Some(fluid) = &self.params.fluid {
+            g.external = crate::fluid::forces(g, fluid).0;
+        }
+        self.push.clear();
         if self.params.transfer == GrainTransfer::Flip {
             // Each slot's acceleration of the last step; nodes the coupler did not constrain
             // then push nothing.
@@ -147,7 +159,12 @@ impl<S: Space> CoupledStep<S> {
             for (k, &i) in self.hybrid.iter().enumerate() {
                 let i = i as usize;
                 let (a, _) = self.stencils.interpolate(k, |slot| Some(accel[slot]));
-                g.external[i] = a * (g.mass[i] * g.scale[i]);
+                let push = a * (g.mass[i] * g.scale[i]);
+                self.push.push(push);
+                g.external[i] = match self.params.fluid {
+                    Some(_) => g.external[i] + push,
+                    None => push,
+                };
             }
         }
         if self.hybrid.is_empty() {
@@ -167,10 +184,10 @@ impl<S: Space> CoupledStep<S> {
     pub fn rasterize(&mut self, state: &DemState<S>, dt: f64) -> &[NodeMomentum<S>] {
         let g = &state.grains;
         let flip = self.params.transfer == GrainTransfer::Flip;
-        let items = self.hybrid.iter().map(|&i| {
+        let items = self.hybrid.iter().enumerate().map(|(k, &i)| {
             let i = i as usize;
             // The push's impulse F dt, rasterized as Σ w F dt.
-            let impulse = if flip { g.external[i] * dt } else { S::V::default() };
+            let impulse = if flip { self.push[k] * dt } else { S::V::default() };
             (g.mass[i] * g.scale[i], g.v[i], impulse)
         });
         let (raster, carried) = self.stencils.rasterize(items);

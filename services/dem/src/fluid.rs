@@ -24,7 +24,7 @@ use crate::state::Grains;
 /// The confining fluid: its pressure [Pa], the cell of its grid [m] (two grain diameters or
 /// more: the ramp needs a few grains per node) and the packing fraction that turns a grain's
 /// volume into the bulk volume it stands for.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fluid {
     pub pressure: f64,
     pub cell: f64,

@@ -79,6 +79,7 @@ fn stage(transfer: GrainTransfer, kernel: Kernel) -> CoupledStep<D2> {
         transfer,
         quasi_static: 1e-3,
         gravity: 9.81,
+        fluid: None,
     })
 }
 

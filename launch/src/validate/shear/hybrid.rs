@@ -96,6 +96,7 @@ impl Coupled {
                 transfer,
                 quasi_static: 0.0,
                 gravity: 0.0,
+                fluid: None,
             }),
             zones: plan.zones,
             cells,

@@ -46,16 +46,17 @@ pub struct DemSolver<S: Space> {
     fluid: Option<grains_dem::fluid::Fluid>,
 }
 
-/// The fluid of a scene whose DEM bodies are confined: its pressure, a grid of two of the
-/// largest grain's diameters (the ramp needs a few grains per node) and the packing fraction
-/// of the grains that move in the confined boxes; with the work p V the fluid can do on them
-/// (V the boxes' volume), for the runaway bound.
+/// The fluid of a scene whose bodies with grains are confined: its pressure, a grid of two of
+/// the largest grain's diameters (the ramp needs a few grains per node) and the packing
+/// fraction (a hybrid body's continuum's; else that of the grains that move in the confined
+/// boxes); with the work p V the fluid can do on them (V the boxes' volume), for the runaway
+/// bound.
 fn fluid<S: Space>(scene: &Scene, state: &DemState<S>) -> Option<(grains_dem::fluid::Fluid, f64)> {
     use grains_protocol::scene::Shape;
     let confined: Vec<_> = scene
         .bodies
         .iter()
-        .filter(|b| b.model == Model::Dem && b.confining_pressure > 0.0)
+        .filter(|b| matches!(b.model, Model::Dem | Model::Hybrid) && b.confining_pressure > 0.0)
         .collect();
     let first = confined.first()?;
     let dim = S::DIM;
@@ -77,10 +78,11 @@ fn fluid<S: Space>(scene: &Scene, state: &DemState<S>) -> Option<(grains_dem::fl
     };
     let solid: f64 = moving.clone().map(|i| ball(g.radius[i])).sum();
     let largest = moving.map(|i| g.radius[i]).fold(0.0, f64::max);
+    let continuum = scene.materials[first.material].mpm.as_ref().map(|m| m.packing);
     let fluid = grains_dem::fluid::Fluid {
         pressure: first.confining_pressure,
         cell: 4.0 * largest,
-        packing: (solid / volume).clamp(0.1, 1.0),
+        packing: continuum.unwrap_or((solid / volume).clamp(0.1, 1.0)),
     };
     Some((fluid, fluid.pressure * volume))
 }
@@ -159,6 +161,7 @@ impl<S: Space> DemSolver<S> {
                 },
                 quasi_static: scene.coupling.quasi_static,
                 gravity: S::from_array(scene.gravity).length(),
+                fluid: fluid.map(|f| f.0),
             }),
             frames: frames.map(|f| (f, scene.output.frames_every)),
             out_dir: out_dir.map(std::path::Path::to_path_buf),
@@ -184,8 +187,8 @@ impl<S: Space> DemSolver<S> {
         Ok(solver)
     }
 
-    /// The confining fluid's load on every grain, for the macro-step about to run (the
-    /// scene admits no hybrid body beside it, so no coupling load shares `external`).
+    /// The confining fluid's load on every grain, for the macro-step about to run alone (a
+    /// coupled step sets it itself, beside the coupling's push: [`CouplingParams::fluid`]).
     fn confine(&mut self) {
         if let Some(f) = &self.fluid {
             self.state.grains.external = grains_dem::fluid::forces(&self.state.grains, f).0;
@@ -293,7 +296,6 @@ impl<S: Space> Solver for DemSolver<S> {
     /// [`CoupledStep::advance`], the NaN and runaway checks, [`CoupledStep::rasterize`].
     fn predict(&mut self, window: &StepWindow) -> anyhow::Result<usize> {
         let substeps = substeps(window)?;
-        self.confine();
         self.coupled.advance(&mut self.state, &mut self.pipeline, window.dt, substeps);
         self.check(window.step, window.dt / substeps as f64)?;
         Ok(self.coupled.rasterize(&self.state, window.dt).len())
