@@ -1060,15 +1060,19 @@ mod tests {
         }
     }
 
-    /// App. B's membrane holds a sample at its pressure: a 400-grain box consolidated at p,
-    /// its side walls replaced by membranes at p and its top platen held, passes p to the
-    /// grains (its traction, and their lateral stress by Love–Weber within 5%: 0.967 p, the
-    /// estimator's own error at the boundary), keeps its area, and no grain gets out between
-    /// the nodes. (The vertical stress is not p: at a fixed height a frictional packing may keep
-    /// less; it settles at 0.92 p here.) With the membrane's pressure at zero the sample
-    /// springs out and σxx falls: the test fails then.
-    #[test]
-    fn a_membrane_holds_the_sample_at_its_pressure() {
+    /// The membrane's and the fluid's tests' sample: a box of about 400 grains of the scene's
+    /// material, consolidated at p by its servo walls (one thread).
+    struct Consolidated {
+        density: f64,
+        d: f64,
+        state: DemState<D2>,
+        pipe: DemPipeline<D2>,
+        dt: f64,
+        w0: f64,
+        h0: f64,
+    }
+
+    fn consolidated() -> Consolidated {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(SCENE);
         let scene = grains_protocol::scene::load(&path).unwrap();
         let mat = &scene.materials[scene.bodies[0].material];
@@ -1080,12 +1084,41 @@ mod tests {
         let mut pipe = DemPipeline::<D2>::new(1).unwrap();
         let rate = 1e-3 * (PRESSURE / mat.density).sqrt() / d;
         let (w0, h0) = consolidate_box(&mut state, &mut pipe, dt, PRESSURE, rate).unwrap();
+        Consolidated {
+            density: mat.density,
+            d,
+            state,
+            pipe,
+            dt,
+            w0,
+            h0,
+        }
+    }
+
+    /// App. B's membrane holds a sample at its pressure: a 400-grain box consolidated at p,
+    /// its side walls replaced by membranes at p and its top platen held, passes p to the
+    /// grains (its traction, and their lateral stress by Love–Weber within 5%: 0.967 p, the
+    /// estimator's own error at the boundary), keeps its area, and no grain gets out between
+    /// the nodes. (The vertical stress is not p: at a fixed height a frictional packing may keep
+    /// less; it settles at 0.92 p here.) With the membrane's pressure at zero the sample
+    /// springs out and σxx falls: the test fails then.
+    #[test]
+    fn a_membrane_holds_the_sample_at_its_pressure() {
+        let Consolidated {
+            density,
+            d,
+            mut state,
+            mut pipe,
+            dt,
+            w0,
+            h0,
+        } = consolidated();
         let (sxx, syy, ..) = box_stresses(&mut state, &mut pipe, dt, 200);
         assert!(
             (sxx / PRESSURE - 1.0).abs() < 0.03 && (syy / PRESSURE - 1.0).abs() < 0.03,
             "{sxx} {syy}"
         );
-        let membrane = Membrane::wrap(&mut state, PRESSURE, d, mat.density);
+        let membrane = Membrane::wrap(&mut state, PRESSURE, d, density);
         pipe.invalidate();
         let run = |state: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, steps: usize| {
             let mut load = 0.0;
@@ -1138,20 +1171,18 @@ mod tests {
     /// the test fails then (checked).
     #[test]
     fn a_fluid_holds_the_sample_at_its_pressure() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(SCENE);
-        let scene = grains_protocol::scene::load(&path).unwrap();
-        let mat = &scene.materials[scene.bodies[0].material];
-        let d = 2.0 * mat.dem.as_ref().unwrap().radius;
-        let spacing = crate::calibrate::shear::ShearCell::spacing(mat.dem.as_ref().unwrap());
-        let width = 16.0 * spacing;
-        let mut state = box_sample(mat, width, 1.5 * width, 3).unwrap();
-        let (dt, ..) = grains_dem_service::setup::stable_step(&scene).unwrap();
-        let mut pipe = DemPipeline::<D2>::new(1).unwrap();
-        let rate = 1e-3 * (PRESSURE / mat.density).sqrt() / d;
-        let (w0, h0) = consolidate_box(&mut state, &mut pipe, dt, PRESSURE, rate).unwrap();
+        let Consolidated {
+            density,
+            d,
+            mut state,
+            mut pipe,
+            dt,
+            w0,
+            h0,
+        } = consolidated();
         let walls = (plane_point(&state, 0).x, plane_point(&state, 1).x);
         let packing = state.grains.radius.iter().map(|r| std::f64::consts::PI * r * r).sum::<f64>() / (w0 * h0);
-        let sides = Sides::wrap(Confinement::Fluid, &mut state, PRESSURE, d, mat.density, packing);
+        let sides = Sides::wrap(Confinement::Fluid, &mut state, PRESSURE, d, density, packing);
         pipe.invalidate();
         let run = |state: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, steps: usize| {
             let mut load = 0.0;
