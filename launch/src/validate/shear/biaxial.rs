@@ -1072,6 +1072,18 @@ mod tests {
         h0: f64,
     }
 
+    /// `steps` steps of the sample held by `sides` with its top platen fixed: the platen's
+    /// mean load and the area at the end.
+    fn held(sides: &Sides, state: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, dt: f64, steps: usize) -> (f64, f64) {
+        let mut load = 0.0;
+        for _ in 0..steps {
+            sides.load(state, dt);
+            pipe.run(state, dt, 1);
+            load += state.walls[1].load[1].abs();
+        }
+        (load / steps as f64, sides.area(state))
+    }
+
     fn consolidated() -> Consolidated {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(SCENE);
         let scene = grains_protocol::scene::load(&path).unwrap();
@@ -1120,17 +1132,10 @@ mod tests {
         );
         let membrane = Membrane::wrap(&mut state, PRESSURE, d, density);
         pipe.invalidate();
-        let run = |state: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, steps: usize| {
-            let mut load = 0.0;
-            for _ in 0..steps {
-                membrane.load(state, dt);
-                pipe.run(state, dt, 1);
-                load += state.walls[1].load[1].abs();
-            }
-            (load / steps as f64, membrane.area(state))
-        };
-        let (_, a0) = run(&mut state, &mut pipe, SETTLE);
-        let (load, area) = run(&mut state, &mut pipe, 4000);
+        let sides = Sides::Membrane(membrane);
+        let (_, a0) = held(&sides, &mut state, &mut pipe, dt, SETTLE);
+        let (load, area) = held(&sides, &mut state, &mut pipe, dt, 4000);
+        let Sides::Membrane(membrane) = sides else { unreachable!() };
         let width = w0 * area / a0;
         let syy = load / width;
         let s = crate::calibrate::shear::love_weber(&pipe, &state, width * h0);
@@ -1184,17 +1189,8 @@ mod tests {
         let packing = state.grains.radius.iter().map(|r| std::f64::consts::PI * r * r).sum::<f64>() / (w0 * h0);
         let sides = Sides::wrap(Confinement::Fluid, &mut state, PRESSURE, d, density, packing);
         pipe.invalidate();
-        let run = |state: &mut DemState<D2>, pipe: &mut DemPipeline<D2>, steps: usize| {
-            let mut load = 0.0;
-            for _ in 0..steps {
-                sides.load(state, dt);
-                pipe.run(state, dt, 1);
-                load += state.walls[1].load[1].abs();
-            }
-            (load / steps as f64, sides.area(state))
-        };
-        let (_, a0) = run(&mut state, &mut pipe, SETTLE);
-        let (load, area) = run(&mut state, &mut pipe, 4000);
+        let (_, a0) = held(&sides, &mut state, &mut pipe, dt, SETTLE);
+        let (load, area) = held(&sides, &mut state, &mut pipe, dt, 4000);
         let width = w0 * area / a0;
         let s = crate::calibrate::shear::love_weber(&pipe, &state, width * h0);
         let (lateral, _) = sides.lateral(&pipe, &state);
