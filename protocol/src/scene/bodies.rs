@@ -84,8 +84,8 @@ fn body(ctx: &Ctx, dim: usize, b: &RawBody, materials: &[Material], f: &dyn Fn(&
                 Some(p.span()),
                 Some(&f("confining_pressure")),
                 "only a model = \"mpm\" or \"dem\" body of shape \"box\" that is not frozen can be confined (a frozen body is a \
-                 wall; a hybrid body's grains and points each take the fluid, but together they give its core 1.11 p, not p: \
-                 not validated, docs/validation.md)"
+                 wall; a hybrid body's grains and points each take the fluid, but no scene has shown its core at p yet: \
+                 docs/validation.md)"
                     .into(),
             ));
         }
