@@ -168,6 +168,43 @@ pub fn unused(scene: &Scene) -> Option<String> {
     })
 }
 
+/// Hybrid bodies whose grains stand on the setup's lattice (no `packing` file) at a packing
+/// fraction other than their continuum's: per volume the discrete part then weighs less than
+/// the points it is coupled to (the lattice keeps the largest grains apart: about 0.65 for
+/// 1-mm grains of σ 0.04 mm, against a continuum's 0.82).
+pub fn lattice_density(scene: &Scene) -> Vec<String> {
+    // A shear-band hybrid starts as a continuum: its grains come from the oracle's packing.
+    if scene
+        .oracle
+        .as_ref()
+        .is_some_and(|o| o.kind == grains_protocol::scene::OracleKind::ShearBand)
+    {
+        return Vec::new();
+    }
+    scene
+        .bodies
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| b.model == grains_protocol::scene::Model::Hybrid && b.packing.is_none())
+        .filter_map(|(k, b)| {
+            let m = &scene.materials[b.material];
+            let (dem, mpm) = (m.dem.as_ref()?, m.mpm.as_ref()?);
+            let lattice = grains_dem_service::setup::lattice_packing(dem, scene.dim());
+            ((lattice / mpm.packing - 1.0).abs() > 0.05).then(|| {
+                format!(
+                    "{}: body.{k}: its grains are built on a lattice at packing {lattice:.3} and its continuum is at {}: per volume \
+                     the discrete part is {:.0}% {} than the points it is coupled to (`grains pack` a bed and name it in \
+                     body.{k}.packing for grains as dense as the continuum)",
+                    scene.path.display(),
+                    mpm.packing,
+                    100.0 * (1.0 - lattice / mpm.packing).abs(),
+                    if lattice < mpm.packing { "lighter" } else { "heavier" }
+                )
+            })
+        })
+        .collect()
+}
+
 /// `grains check`: validates a scene file and the solvers' checks of it, and says what a
 /// run would start.
 pub fn check(path: &Path) -> anyhow::Result<()> {
@@ -179,6 +216,9 @@ pub fn check(path: &Path) -> anyhow::Result<()> {
         check_physics(&s)?;
     }
     if let Some(note) = unused(&s) {
+        println!("{note}");
+    }
+    for note in lattice_density(&s) {
         println!("{note}");
     }
     let roles: Vec<_> = s.participants().iter().map(|r| r.binary()).collect();
@@ -295,6 +335,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         check_physics(&scene)?;
     }
     if let Some(note) = unused(&scene) {
+        tracing::warn!("{note}");
+    }
+    for note in lattice_density(&scene) {
         tracing::warn!("{note}");
     }
     for e in &opts.external {
@@ -466,5 +509,23 @@ mod tests {
         let (dem, ..) = super::steps::load(&path, &["body.0.model=\"dem\"".into()]).unwrap();
         let note = super::unused(&dem).expect("a note");
         assert!(note.contains("[oracle] is not used"), "{note}");
+    }
+
+    /// The quickstart's hybrid column builds its grains on the lattice (packing 0.652) beside
+    /// a continuum at 0.82, and is told so; the plate's hybrid starts as a continuum and takes
+    /// its grains from a poured bed (the shear-band oracle's packing), and is not.
+    #[test]
+    fn a_hybrid_body_on_a_looser_lattice_than_its_continuum_is_reported() {
+        let scenes = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        let (quick, ..) = super::steps::load(&scenes.join("quickstart_hybrid_2d.toml"), &[]).unwrap();
+        let notes = super::lattice_density(&quick);
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(
+            notes[0].contains("body.0") && notes[0].contains("packing 0.652") && notes[0].contains("20% lighter"),
+            "{}",
+            notes[0]
+        );
+        let (plate, ..) = super::steps::load(&scenes.join("plate_indentation_hybrid_2d.toml"), &[]).unwrap();
+        assert!(super::lattice_density(&plate).is_empty());
     }
 }

@@ -37,6 +37,22 @@ fn min_radius(m: &DemMaterial) -> f64 {
     (m.radius - 2.0 * m.radius_std).max(0.05 * m.radius)
 }
 
+/// The spacing of the lattice a body without a packing file is built on: the largest grain
+/// (r + 2σ, where the radius distribution is clamped) with 2% to spare.
+pub fn lattice_spacing(dem: &DemMaterial) -> f64 {
+    2.0 * (dem.radius + 2.0 * dem.radius_std) * 1.02
+}
+
+/// The packing fraction of that lattice ([`lattice_in_box`]: triangular rows in 2D, square
+/// layers in 3D, one site per s² √3/2 or s³) for grains of the material's radius and spread.
+pub fn lattice_packing(dem: &DemMaterial, dim: usize) -> f64 {
+    let (s, r, var) = (lattice_spacing(dem), dem.radius, dem.radius_std.powi(2));
+    match dim {
+        2 => std::f64::consts::PI * (r * r + var) / (s * s * 3f64.sqrt() / 2.0),
+        _ => 4.0 / 3.0 * std::f64::consts::PI * (r.powi(3) + 3.0 * r * var) / s.powi(3),
+    }
+}
+
 /// A grain's mass of radius `r` [m] (2D: per metre).
 pub fn grain_mass(dim: usize, r: f64, density: f64) -> f64 {
     if dim == 2 {
@@ -304,7 +320,7 @@ impl BodyGrains<'_> {
     fn add_lattice<S: Space>(&self, state: &mut DemState<S>, dem: &DemMaterial, rng: &mut Rng, from_packing: &mut Vec<bool>) {
         let (body, dim) = (self.body, self.scene.dim());
         let r_max = dem.radius + 2.0 * dem.radius_std;
-        let spacing = 2.0 * r_max * 1.02;
+        let spacing = lattice_spacing(dem);
         let (lo, hi, ball) = match body.shape {
             Shape::Box { min, max } => (min, max, None),
             Shape::Ball { center, radius } => {
