@@ -281,14 +281,15 @@ impl Sides {
 
     /// The lateral stress the grains take from the sides and the springs' net pull, over the
     /// pressure ([`Membrane::traction`], [`Membrane::pull`]); the fluid's is its net inward
-    /// force on each half of the sample over twice the height between the platens (walls 0
-    /// and 1 after the wrap), and it pulls nothing.
+    /// force on each half of the sample (the load [`Sides::load`] set for the last step) over
+    /// twice the height between the platens (walls 0 and 1 after the wrap), and it pulls
+    /// nothing.
     pub fn lateral(&self, pipe: &DemPipeline<D2>, state: &DemState<D2>) -> (f64, f64) {
         match self {
             Sides::Membrane(m) => (m.traction(pipe, state) / m.pressure, m.pull(state) / m.pressure),
             Sides::Fluid(f) => {
                 let g = &state.grains;
-                let (forces, _) = grains_dem::fluid::forces(g, f);
+                let forces = &g.external;
                 let mid = g.x.iter().map(|x| x.x).sum::<f64>() / g.len() as f64;
                 let push: f64 = (0..g.len()).map(|i| if g.x[i].x > mid { -forces[i].x } else { forces[i].x }).sum();
                 let height = plane_point(state, 1).y - plane_point(state, 0).y;

@@ -41,9 +41,6 @@ pub struct DemSolver<S: Space> {
     point_contacts: grains_dem::bodies::BodyContacts,
     /// `bodies.csv`: per macro-step, each rigid body's pose and the force and torque on it.
     bodies_log: Option<StepLog>,
-    /// The scene's confining pressure on the grains (`grains_dem::fluid`), set as their
-    /// external load at the start of every macro-step and held over its substeps.
-    fluid: Option<grains_dem::fluid::Fluid>,
 }
 
 /// The fluid of a scene whose bodies with grains are confined: its pressure, a grid of two of
@@ -69,14 +66,8 @@ fn fluid<S: Space>(scene: &Scene, state: &DemState<S>) -> Option<(grains_dem::fl
         .sum();
     let g = &state.grains;
     let moving = (0..g.len()).filter(|&i| !g.frozen[i]);
-    let ball = |r: f64| {
-        if dim == 2 {
-            std::f64::consts::PI * r * r
-        } else {
-            4.0 / 3.0 * std::f64::consts::PI * r.powi(3)
-        }
-    };
-    let solid: f64 = moving.clone().map(|i| ball(g.radius[i])).sum();
+    // A grain's volume: its mass at unit density.
+    let solid: f64 = moving.clone().map(|i| crate::setup::grain_mass(dim, g.radius[i], 1.0)).sum();
     let largest = moving.map(|i| g.radius[i]).fold(0.0, f64::max);
     let continuum = scene.materials[first.material].mpm.as_ref().map(|m| m.packing);
     let fluid = grains_dem::fluid::Fluid {
@@ -177,7 +168,6 @@ impl<S: Space> DemSolver<S> {
             resumed: resume,
             point_contacts: Default::default(),
             bodies_log,
-            fluid: fluid.map(|f| f.0),
         };
         if let Some((f, _)) = &mut solver.frames
             && resume.is_none()
@@ -187,10 +177,11 @@ impl<S: Space> DemSolver<S> {
         Ok(solver)
     }
 
-    /// The confining fluid's load on every grain, for the macro-step about to run alone (a
-    /// coupled step sets it itself, beside the coupling's push: [`CouplingParams::fluid`]).
+    /// The confining fluid's load on every grain (the scene's, kept with the coupled step's
+    /// parameters: [`CouplingParams::fluid`]), for the macro-step about to run alone; a
+    /// coupled step sets it itself, beside the coupling's push. Held over the substeps.
     fn confine(&mut self) {
-        if let Some(f) = &self.fluid {
+        if let Some(f) = &self.coupled.params.fluid {
             self.state.grains.external = grains_dem::fluid::forces(&self.state.grains, f).0;
         }
     }
