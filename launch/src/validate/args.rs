@@ -121,6 +121,14 @@ pub struct ValidateArgs {
     /// contact with the grains: App. B's springs, our discretisation).
     #[arg(long = "biaxial-confinement", value_enum, default_value = "fluid")]
     pub biaxial_confinement: Confinement,
+    /// The hybrid biaxial's enrichment distances φ0 in D50 (`--part biaxial`; Chen 2021 Table
+    /// 6: 10), one run each per transfer of `--shear-transfer` (Fig. 19–20: the band against
+    /// the discrete zone's thickness).
+    #[arg(long = "biaxial-phi0", value_delimiter = ',', default_value = "10")]
+    pub biaxial_phi0: Vec<f64>,
+    /// The hybrid biaxial's continuum cells in D50 (Fig. 21: the band against the grid).
+    #[arg(long = "biaxial-cells", value_delimiter = ',', default_value = "2")]
+    pub biaxial_cells: Vec<f64>,
     /// Parts to run (default all; `--quick`: those of the CI subset, each in its quick form).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub part: Vec<PartName>,

@@ -450,7 +450,15 @@ pub(super) fn continuum_run(
             if let Some(transfer) = hybrid {
                 let enriched = enrich_and_train(dem, &detection, &history, h)?;
                 training = Some(enriched.training.clone());
-                coupled = Some(Coupled::new(enriched, &mut pts, &params, (cells, transfer), dt, dem.dt, w));
+                coupled = Some(Coupled::new(
+                    (enriched.plan, enriched.state, enriched.pipe),
+                    &mut pts,
+                    &params,
+                    (cells, transfer, None),
+                    dt,
+                    dem.dt,
+                    Some(w),
+                ));
             }
             at_detection = Some(detection);
             tracing::info!(

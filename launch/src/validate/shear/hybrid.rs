@@ -5,7 +5,7 @@
 //! after the other, as the run's participants do over shared memory.
 
 use super::continuum::ContinuumShear;
-use super::training::{Enriched, WEIGHT};
+use super::training::WEIGHT;
 use super::*;
 use grains_dem::coupled::{CoupledStep, CouplingParams, GrainTransfer};
 use grains_grid::Grid;
@@ -34,6 +34,10 @@ pub(super) fn transfer_named(name: &str) -> anyhow::Result<GrainTransfer> {
     }
 }
 
+/// What the coupled step starts from: the enrichment's plan, the trained grains and their
+/// pipeline.
+pub(super) type Parts = (grains_oracle::epoch::Plan, grains_dem::DemState<D2>, grains_dem::DemPipeline<D2>);
+
 /// The zone of the cell at `x` (off the grid: continuum).
 fn zone_at(cells: &Grid, zones: &[Zone], x: [f64; 3]) -> Zone {
     grains_oracle::epoch::cell_of(cells, 2, x).map_or(Zone::Continuum, |c| zones[c])
@@ -48,7 +52,8 @@ pub(super) struct Coupled {
     cells: Grid,
     /// DEM substeps per MPM step.
     pub(super) substeps: usize,
-    width: f64,
+    /// The period along x (the planar shear's), or none (the biaxial's).
+    width: Option<f64>,
     /// The grains' positions when the strain window opens, by id (x unwrapped from there).
     reference: Option<HashMap<u64, [f64; 2]>>,
     /// Σ over the steps of the coupler's report: shared nodes, and the largest momentum error
@@ -64,19 +69,19 @@ pub(super) struct Coupled {
 }
 
 impl Coupled {
-    /// Takes the enriched band: the plan's deletions and mass factors applied to the MPM's
+    /// Takes the enriched band (the plan, the trained grains and their pipeline): the plan's deletions and mass factors applied to the MPM's
     /// points, each point weighed by its cell's zone (w in a hybrid cell), each grain likewise
-    /// (1 − w); the DEM's substeps for the MPM's step `dt` at the DEM's own step `dem_dt`.
+    /// (1 − w); the DEM's substeps for the MPM's step `dt` at the DEM's own step `dem_dt`; the
+    /// grains in a confining `fluid` or none (the points take theirs from `params`).
     pub(super) fn new(
-        enriched: Enriched,
+        (plan, state, pipe): Parts,
         pts: &mut Points<D2>,
         params: &MpmParams<D2>,
-        (cells, transfer): (Grid, GrainTransfer),
+        (cells, transfer, fluid): (Grid, GrainTransfer, Option<grains_dem::fluid::Fluid>),
         dt: f64,
         dem_dt: f64,
-        width: f64,
+        width: Option<f64>,
     ) -> Self {
-        let Enriched { plan, state, pipe, .. } = enriched;
         let gone: HashSet<u64> = plan.delete_points.iter().copied().collect();
         let keep: Vec<u32> = (0..pts.len()).filter(|&k| !gone.contains(&pts.id[k])).map(|k| k as u32).collect();
         pts.retain_indices(&keep);
@@ -96,7 +101,7 @@ impl Coupled {
                 transfer,
                 quasi_static: 0.0,
                 gravity: 0.0,
-                fluid: None,
+                fluid,
             }),
             zones: plan.zones,
             cells,
@@ -141,7 +146,7 @@ impl Coupled {
         self.mass_change = self.mass_change.max(change);
     }
 
-    fn zone(&self, x: [f64; 3]) -> Zone {
+    pub(super) fn zone(&self, x: [f64; 3]) -> Zone {
         zone_at(&self.cells, &self.zones, x)
     }
 
@@ -200,9 +205,22 @@ impl Coupled {
         Ok(())
     }
 
-    /// The grains' positions now, by id, x unwrapped against the window's start.
-    fn positions(&self) -> HashMap<u64, [f64; 2]> {
-        positions_of(&self.state, self.width, |_| true, self.reference.as_ref())
+    /// The grains' positions now, by id, x unwrapped against the window's start (if periodic).
+    pub(super) fn positions(&self) -> HashMap<u64, [f64; 2]> {
+        match self.width {
+            Some(width) => positions_of(&self.state, width, |_| true, self.reference.as_ref()),
+            None => positions_of(&self.state, f64::INFINITY, |_| true, None),
+        }
+    }
+
+    /// The DEM's state (its walls, for a moving platen).
+    pub(super) fn dem_mut(&mut self) -> &mut grains_dem::DemState<D2> {
+        &mut self.state
+    }
+
+    /// The DEM's state.
+    pub(super) fn dem(&self) -> &grains_dem::DemState<D2> {
+        &self.state
     }
 
     /// Marks the strain window's start.
@@ -218,12 +236,13 @@ impl Coupled {
     /// below and above the region's middle.
     pub(super) fn band(&self, d: f64, height: f64) -> anyhow::Result<(Measured, usize, [usize; 2])> {
         let from = self.reference.as_ref().context("the hybrid shear reached the window's start")?;
-        let inside = |p: &[f64; 2]| self.zone([p[0].rem_euclid(self.width), p[1], 0.0]) != Zone::Continuum;
+        let width = self.width.context("the planar shear's band is measured in a periodic cell")?;
+        let inside = |p: &[f64; 2]| self.zone([p[0].rem_euclid(width), p[1], 0.0]) != Zone::Continuum;
         let from: HashMap<u64, [f64; 2]> = from.iter().filter(|(_, p)| inside(p)).map(|(&id, &p)| (id, p)).collect();
         let now = self.positions();
         let middle = from.values().map(|p| p[1]).sum::<f64>() / from.len().max(1) as f64;
         let strays = [false, true].map(|up| now.values().filter(|p| !inside(p) && (p[1] > middle) == up).count());
-        Ok((band_of(&from, &now, d, self.width, height)?, from.len(), strays))
+        Ok((band_of(&from, &now, d, width, height)?, from.len(), strays))
     }
 }
 

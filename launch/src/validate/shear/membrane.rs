@@ -191,6 +191,23 @@ impl Membrane {
     }
 }
 
+/// The area of disks (centre, radius) as their outer faces enclose it: in horizontal slabs
+/// about `cell` high, the extent of the disks whose centres lie in each, over its height.
+pub(super) fn slab_area(disks: &[([f64; 2], f64)], cell: f64) -> f64 {
+    let (lo, hi) = disks.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, r)| {
+        (lo.min(x[1] - r), hi.max(x[1] + r))
+    });
+    let slabs = ((hi - lo) / cell).ceil().max(1.0) as usize;
+    let dy = (hi - lo) / slabs as f64;
+    let mut extent = vec![(f64::INFINITY, f64::NEG_INFINITY); slabs];
+    for (x, r) in disks {
+        let k = (((x[1] - lo) / dy) as usize).min(slabs - 1);
+        extent[k].0 = extent[k].0.min(x[0] - r);
+        extent[k].1 = extent[k].1.max(x[0] + r);
+    }
+    extent.iter().filter(|e| e.1 > e.0).map(|e| (e.1 - e.0) * dy).sum()
+}
+
 /// The plane's vectors (glam's, through the DEM's space).
 type DVec2 = <D2 as Space>::V;
 
@@ -253,18 +270,10 @@ impl Sides {
             Sides::Membrane(m) => m.area(state),
             Sides::Fluid(f) => {
                 let g = &state.grains;
-                let (lo, hi) = (0..g.len()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), i| {
-                    (lo.min(g.x[i].y - g.radius[i]), hi.max(g.x[i].y + g.radius[i]))
-                });
-                let slabs = ((hi - lo) / f.cell).ceil().max(1.0) as usize;
-                let dy = (hi - lo) / slabs as f64;
-                let mut extent = vec![(f64::INFINITY, f64::NEG_INFINITY); slabs];
-                for i in 0..g.len() {
-                    let k = (((g.x[i].y - lo) / dy) as usize).min(slabs - 1);
-                    extent[k].0 = extent[k].0.min(g.x[i].x - g.radius[i]);
-                    extent[k].1 = extent[k].1.max(g.x[i].x + g.radius[i]);
-                }
-                extent.iter().filter(|e| e.1 > e.0).map(|e| (e.1 - e.0) * dy).sum()
+                slab_area(
+                    &(0..g.len()).map(|i| ([g.x[i].x, g.x[i].y], g.radius[i])).collect::<Vec<_>>(),
+                    f.cell,
+                )
             }
         }
     }

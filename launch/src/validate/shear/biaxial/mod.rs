@@ -11,8 +11,10 @@
 //! critical-state continuum on two grids, confined by a fluid's pressure, with the shear-band
 //! oracle watching.
 
+mod hybrid;
+
 use super::SCENE;
-use super::membrane::{GAMMA_MS, K_MS, MEMBRANE, NODE_SPACING_D, Sides, plane_point};
+use super::membrane::{GAMMA_MS, K_MS, MEMBRANE, NODE_SPACING_D, Sides, plane_point, slab_area};
 use crate::calibrate::{box_sample, consolidate_box};
 use crate::report::Part;
 use crate::report::chart::{Chart, Kind, Series};
@@ -94,6 +96,10 @@ pub(super) struct BiaxialRun {
     /// The springs' net pull on the free nodes over the window, likewise ([`Membrane::pull`]).
     pull: f64,
     wall: f64,
+    /// The specimen at the start of its shortening (the hybrid's prepared packing), and the
+    /// DEM's step.
+    sample: DemState<D2>,
+    dt: f64,
 }
 
 fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confinement: Confinement) -> anyhow::Result<BiaxialRun> {
@@ -132,6 +138,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confin
         pipe.run(&mut state, dt, 1);
     }
     let a0 = sides.area(&state);
+    let prepared = state.clone();
     let speed = SPEED_OVER_HEIGHT * h0;
     tracing::info!(
         "validate shear: biaxial, seed {seed}: {sample} grains, {:.1} x {:.1} D50, packing {packing:.3}, top at {:.1} mm/s",
@@ -229,6 +236,8 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confin
         lateral,
         pull,
         wall: t0.elapsed().as_secs_f64(),
+        sample: prepared,
+        dt,
     })
 }
 
@@ -529,7 +538,7 @@ fn continuum(
     let (bulk, shear) = (model.bulk, model.shear);
     let runs: Vec<ContinuumBiaxial> = CELLS_D
         .iter()
-        .map(|&c| continuum_run(dem, &model, scene.materials[material].density, d, c))
+        .map(|&c| continuum_run(dem, &model, scene.materials[material].density, d, c, None))
         .collect::<anyhow::Result<_>>()?;
     let _ = writeln!(
         md,
@@ -643,6 +652,7 @@ fn continuum(
             &chart,
         )?;
     }
+    let hybrids = hybrid_report(dem, &model, scene.materials[material].density, d, args, part, md)?;
     for (stem, caption, y_label, f) in [
         (
             "shear_biaxial_friction_continuum",
@@ -668,12 +678,152 @@ fn continuum(
                     runs.iter()
                         .map(|r| line(format!("continuum, {:.0}-D50 cells", r.cell / d), &r.records)),
                 )
+                .chain(hybrids.iter().map(|(name, records)| line(name.clone(), records)))
                 .collect(),
             ..Chart::default()
         };
         part.chart(&args.out, stem, caption, &chart)?;
     }
     Ok(())
+}
+
+/// The hybrid biaxial on seed 1's sample, once per continuum cell of `--biaxial-cells` (2 D50
+/// by default: on 4-D50 cells the continuum's failure starts under the platen,
+/// docs/validation.md), φ0 of `--biaxial-phi0` and transfer of `--shear-transfer`: its table,
+/// checks and band pictures. Returns each finished run's records, labelled.
+fn hybrid_report(
+    dem: &BiaxialRun,
+    model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
+    density: f64,
+    d: f64,
+    args: &super::ValidateArgs,
+    part: &mut Part,
+    md: &mut String,
+) -> anyhow::Result<Vec<(String, Vec<Record>)>> {
+    let _ = writeln!(
+        md,
+        "### Hybrid (Fig. 16–21)\n\nThe continuum above (on the cells named) until the oracle fires; then the cells \
+         within φ0 of the flagged ones (Table 6: 1 cm, 10 D50) enriched with seed {}'s DEM specimen as it stood before its \
+         shortening (less half a cell: discrete, the points deleted; the next cell: hybrid, w = {}), those grains trained \
+         from the start of the shortening to the detection (§4.1.1: a ring of the sample's grains in the continuum cells \
+         around the region moves with the continuum's nodal velocity and is dropped after; the region's grains move \
+         freely, the fluid's pressure on the free faces, the top wall coming down with the platen; the stress is \
+         Love–Weber's over region and ring), and the two models coupled \
+         every step (the DEM's substeps, the coupler's common velocity on the shared nodes, the grains' transfer back as \
+         named). The fluid's pressure acts on both models' faces (the points' `ambient_pressure`, the grains' \
+         `grains_dem::fluid`), the platen on the points by contact (× their weight) and on the grains as the DEM's wall, \
+         both at the same plane. σ1 is the platen's force on both over the width (the outer faces' area over the \
+         height) plus p, from the start; the volume the area of points and grains in slabs. The band: App. A on the grains \
+         over the window, counting those cut {EDGE_CELLS} cells or more inside the box of their places in the sample.\n\n\
+         | cells, φ0, transfer | grains cut (points deleted) | enrichment: mass, momentum | trained [σxx, σyy] (as cut; the continuum's there) | DEM substeps | t_s (App. A) | profile at half peak | inclination | band grains at a continuum cell | strays | peak φ (axial strain) | φ, ψ over the window | shared nodes a step | coupler's momentum error | mass change | wall |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        dem.seed,
+        super::training::WEIGHT
+    );
+    let mut curves = Vec::new();
+    let runs = args.biaxial_cells.iter().flat_map(|&cells| {
+        args.biaxial_phi0
+            .iter()
+            .flat_map(move |&phi0| args.shear_transfers.iter().map(move |t| (cells, phi0, t)))
+    });
+    for (cells, phi0, transfer) in runs {
+        let name = format!("{cells}-D50 cells, φ0 {phi0} D50, {transfer}");
+        let stem = format!("shear_biaxial_band_hybrid_c{cells}_phi{phi0}_{transfer}").replace([':', '.'], "_");
+        let transfer = super::hybrid::transfer_named(transfer)?;
+        let run = match continuum_run(dem, model, density, d, cells, Some((transfer, phi0))) {
+            Ok(r) => r,
+            Err(e) => {
+                let _ = writeln!(md, "| `{name}` | did not finish: {e:#} |||||||||||||||");
+                part.check(
+                    format!("biaxial (hybrid, {name}) ran to its end"),
+                    "every run completes",
+                    format!("{e:#}"),
+                    "no error",
+                    false,
+                );
+                continue;
+            }
+        };
+        let Some(h) = run.hybrid.as_ref() else { continue };
+        let (peak, _) = peak_angles(&run.records);
+        let (phi, psi) = window_angles(&run.records);
+        let b = &h.band;
+        let _ = writeln!(
+            md,
+            "| `{name}` | {} ({}) | {:.1e}, {:.1e} | [{:.0}, {:.0}] Pa ([{:.0}, {:.0}]; [{:.0}, {:.0}]) | {} | {:.1} D50 ({:.0} long) | {:.0} D50 | {:.1}° | {} of {} | {} | {:.2}° ({:.2}%) | {phi:.2}°, {psi:.2}° | {:.0} | {:.1e} | {:.1e} | {:.0} s |",
+            b.grains,
+            b.deleted,
+            b.mass,
+            b.momentum,
+            b.trained[0],
+            b.trained[1],
+            b.untrained[0],
+            b.untrained[1],
+            b.continuum[0],
+            b.continuum[1],
+            h.substeps,
+            h.t_s,
+            h.length,
+            h.fwhm,
+            h.angle,
+            h.at_interface,
+            h.members.len(),
+            h.strays,
+            peak.1,
+            100.0 * peak.0,
+            h.shared_per_step,
+            h.momentum_error,
+            h.mass_change,
+            run.wall
+        );
+        part.check(
+            format!("biaxial (hybrid, {name}): the band's thickness"),
+            format!(
+                "Chen 2021 Fig. 18: the hybrid's band is the DEM's (10 D50 both); here seed {}'s DEM, {:.1} D50",
+                dem.seed, dem.t_s
+            ),
+            format!("{:.1} D50 at {:.1}°", h.t_s, h.angle),
+            "within 2 D50 of the DEM's (issue 22)",
+            (h.t_s - dem.t_s).abs() <= 2.0,
+        );
+        part.check(
+            format!("biaxial (hybrid, {name}): the band forms within the grains, not at their edge"),
+            "Chen 2021 §4: the enrichment holds the band",
+            format!(
+                "{} of App. A's {} band grains within a cell of a continuum cell",
+                h.at_interface,
+                h.members.len()
+            ),
+            "at most a quarter",
+            4 * h.at_interface <= h.members.len(),
+        );
+        part.check(
+            format!("biaxial (hybrid, {name}): the enrichment and the coupling keep mass and momentum"),
+            "Yue 2018 Alg. 3 and the enrichment's rules: exchanges, not sources",
+            format!(
+                "enrichment: mass {:.1e}, momentum {:.1e}; coupler's largest momentum error of a step {:.1e}; mass change {:.1e}",
+                b.mass, b.momentum, h.momentum_error, h.mass_change
+            ),
+            "round-off (1e-9; the mass over the run 1e-12)",
+            b.mass < 1e-9 && b.momentum < 1e-9 && h.momentum_error < 1e-9 && h.mass_change < 1e-12,
+        );
+        let chart = super::band_chart(
+            format!("Biaxial compression (hybrid, {name}): the band's grains (App. A)"),
+            &h.x0,
+            &h.members,
+            d,
+            "grains",
+        );
+        part.chart(
+            &args.out,
+            &stem,
+            format!("Biaxial compression (hybrid, `{name}`): the grains App. A counts in the band"),
+            &chart,
+        )?;
+        curves.push((format!("hybrid, {name}"), run.records.clone()));
+    }
+    let _ = writeln!(md);
+    Ok(curves)
 }
 
 /// Continuum cells of the biaxial compression [D50] (the planar shear's two grids).
@@ -703,6 +853,29 @@ struct ContinuumBiaxial {
     band: Vec<usize>,
     records: Vec<Record>,
     wall: f64,
+    /// A hybrid run's grains.
+    hybrid: Option<HybridBiaxial>,
+}
+
+/// The hybrid's band in its grains (App. A over the window, as the DEM's), the enrichment and
+/// training, and the coupling's bookkeeping.
+struct HybridBiaxial {
+    band: hybrid::BandGrains,
+    substeps: usize,
+    t_s: f64,
+    length: f64,
+    fwhm: f64,
+    angle: f64,
+    /// The grains' positions at the window's start and App. A's band among them, and how many
+    /// of the band's grains lay within a cell of a continuum cell then.
+    x0: Vec<[f64; 2]>,
+    members: Vec<usize>,
+    at_interface: usize,
+    /// Grains in continuum cells at the end (strays: uncoupled).
+    strays: usize,
+    shared_per_step: f64,
+    momentum_error: f64,
+    mass_change: f64,
 }
 
 /// The biaxial compression of `dem`'s specimen as Chen's critical-state continuum `model`
@@ -711,13 +884,16 @@ struct ContinuumBiaxial {
 /// a frictionless plane moving down at the DEM's speed in contact with the points
 /// ([`platen`]), weak points (at Φ_cs) in a square
 /// of WEAK_D at the right face a quarter of the way up (Chen: "the right lower part"), the
-/// oracle (Alg. 1, Table 6) every ORACLE_EVERY steps.
+/// oracle (Alg. 1, Table 6) every ORACLE_EVERY steps. With `hybrid` (the grains' transfer
+/// back, φ0 in D50), the hybrid of [`hybrid`] from the oracle's detection on, its stress and
+/// volume from the platen's force and the outer faces of points and grains throughout.
 fn continuum_run(
     dem: &BiaxialRun,
     model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
     grain_density: f64,
     d: f64,
     cell_d: f64,
+    hybrid: Option<(grains_dem::coupled::GrainTransfer, f64)>,
 ) -> anyhow::Result<ContinuumBiaxial> {
     use super::continuum::ORACLE_EVERY;
     use grains_grid::{Grid, Kernel};
@@ -796,6 +972,19 @@ fn continuum_run(
     let mut to: Option<HashMap<u64, f64>> = None;
     let mut records = Vec::new();
     let (mut travel, mut v0) = (0.0, None);
+    // The hybrid's: the continuum's nodal velocities up to the detection, the coupled step
+    // after it, the enrichment, the grains at the window's ends, the platen's force summed
+    // since the last record (points and grains) and the area at the start of the shortening.
+    let mut history = hybrid::NodeHistory { grid, records: Vec::new() };
+    let mut coupled: Option<super::hybrid::Coupled> = None;
+    let mut band_grains = None;
+    let (mut grains_from, mut grains_to) = (None, None);
+    let (mut force, mut forces, mut a0) = (0.0, 0usize, None);
+    let fluid = grains_dem::fluid::Fluid {
+        pressure: PRESSURE,
+        cell: 2.0 * d,
+        packing: dem.packing,
+    };
     for step in 0.. {
         if grains_service::signals::signalled() {
             anyhow::bail!("stopped by a signal");
@@ -807,13 +996,15 @@ fn continuum_run(
         let pressing = step >= settle;
         if pressing && from.is_none() && axial >= WINDOW.0 {
             from = Some(
-                (0..n)
+                (0..pts.len())
                     .map(|k| (pts.id[k], ([pts.x[k].x, pts.x[k].y], pts.plastic_strain[k])))
                     .collect(),
             );
+            grains_from = coupled.as_ref().map(free_grains);
         }
         if pressing && to.is_none() && axial >= WINDOW.1 {
-            to = Some((0..n).map(|k| (pts.id[k], pts.plastic_strain[k])).collect());
+            to = Some((0..pts.len()).map(|k| (pts.id[k], pts.plastic_strain[k])).collect());
+            grains_to = coupled.as_ref().map(free_grains);
         }
         // The top platen moving down, the material free to slip along it (Chen's free-slip
         // top).
@@ -822,12 +1013,29 @@ fn continuum_run(
         } else {
             0.0
         };
-        platen(&mut pts, height - travel, vy, 0.5 * spacing, platen_stiffness);
+        force += platen(&mut pts, height - travel, vy, 0.5 * spacing, platen_stiffness);
         travel -= vy * dt;
         pipe.phase1(&pts, &params, dt)
             .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
+        if hybrid.is_some() && pressing && detected.is_none() && (step - settle).is_multiple_of(ORACLE_EVERY) {
+            history.record((step + 1 - settle) as f64 * dt, &mut pipe);
+        }
+        let constrained = match coupled.as_mut() {
+            Some(c) => {
+                c.dem_mut().walls[1].velocity = D2::from_array([0.0, vy, 0.0]);
+                let v = c.couple(&mut pipe, &params, dt)?;
+                force += c.dem().walls[1].load[1];
+                Some(v)
+            }
+            None => None,
+        };
+        forces += 1;
         pipe.phase2(&mut pts, &params, dt)
             .map_err(|e| anyhow::anyhow!("continuum biaxial: {e}"))?;
+        if let (Some(c), Some(v)) = (coupled.as_mut(), constrained) {
+            c.finish(&v, dt)?;
+            c.track_mass(&pts);
+        }
         if !pressing || !(step - settle).is_multiple_of(ORACLE_EVERY) {
             continue;
         }
@@ -854,6 +1062,51 @@ fn continuum_run(
                     .collect();
                 let mean = [0, 1].map(|k| at.iter().map(|p| p[k]).sum::<f64>() / at.len() as f64 / d);
                 detected = Some((axial, at.len(), mean));
+                if let Some((transfer, phi0_d)) = hybrid {
+                    let detection = super::continuum::Detection {
+                        strain: axial,
+                        shear_stress: 0.0,
+                        nodes: params.grid,
+                        kernel: params.kernel,
+                        cells,
+                        flagged: persistence.flagged().to_vec(),
+                        points: (0..pts.len())
+                            .map(|k| grains_oracle::epoch::Point {
+                                id: pts.id[k],
+                                x: D2::to_array(pts.x[k]),
+                                mass: pts.mass[k],
+                                share: 1.0,
+                                v: D2::to_array(pts.v[k]),
+                            })
+                            .collect(),
+                    };
+                    let stress: Vec<([f64; 2], f64)> = (0..pts.len())
+                        .map(|k| ([pts.tau[k].x_axis.x, pts.tau[k].y_axis.y], pts.jacobian[k] * pts.volume[k]))
+                        .collect();
+                    let duration = (step + 1 - settle) as f64 * dt;
+                    let (parts, grains) = hybrid::enrich_and_train(
+                        &dem.sample,
+                        &detection,
+                        &stress,
+                        &history,
+                        (duration, &fluid),
+                        (dem.dt, GLUE_D * d, speed, travel, phi0_d * d),
+                    )?;
+                    history.records = Vec::new();
+                    let mut c = super::hybrid::Coupled::new(parts, &mut pts, &params, (cells, transfer, Some(fluid)), dt, dem.dt, None);
+                    // The grains' platen where the points' is.
+                    if let grains_dem::state::WallShape::Plane { point, .. } = &mut c.dem_mut().walls[1].shape {
+                        *point = D2::from_array([0.0, height - travel, 0.0]);
+                    }
+                    tracing::info!(
+                        "validate biaxial: hybrid on {cell_d}-D50 cells: {} grains cut, {} points deleted, trained in {:.0} s",
+                        grains.grains,
+                        grains.deleted,
+                        grains.wall
+                    );
+                    band_grains = Some(grains);
+                    coupled = Some(c);
+                }
                 tracing::info!(
                     "validate biaxial: continuum on {cell_d}-D50 cells: the oracle fires at axial strain {axial:.4}, {} cells, mean at ({:.1}, {:.1}) D50",
                     at.len(),
@@ -863,18 +1116,37 @@ fn continuum_run(
             }
         }
         if (step - settle).is_multiple_of(5 * ORACLE_EVERY) {
-            let (mut sxx, mut syy, mut vol) = (0.0, 0.0, 0.0);
-            for k in 0..n {
-                sxx -= pts.tau[k].x_axis.x * pts.volume[k];
-                syy -= pts.tau[k].y_axis.y * pts.volume[k];
-                vol += pts.jacobian[k] * pts.volume[k];
+            if hybrid.is_some() {
+                // σ1 from the platen's force on points and grains over the width (the area
+                // over the height), plus the fluid's pressure on the top (as the DEM's).
+                let mut disks: Vec<([f64; 2], f64)> = (0..pts.len()).map(|k| ([pts.x[k].x, pts.x[k].y], 0.5 * spacing)).collect();
+                if let Some(c) = &coupled {
+                    let g = &c.dem().grains;
+                    disks.extend((0..g.len()).map(|i| ([g.x[i].x, g.x[i].y], g.radius[i])));
+                }
+                let area = slab_area(&disks, 2.0 * d);
+                let a0 = *a0.get_or_insert(area);
+                let sigma1 = force / forces.max(1) as f64 / (area / (height - travel)) + PRESSURE;
+                records.push(Record {
+                    axial,
+                    volumetric: 1.0 - area / a0,
+                    sin_phi: (sigma1 - PRESSURE) / (sigma1 + PRESSURE),
+                });
+            } else {
+                let (mut sxx, mut syy, mut vol) = (0.0, 0.0, 0.0);
+                for k in 0..n {
+                    sxx -= pts.tau[k].x_axis.x * pts.volume[k];
+                    syy -= pts.tau[k].y_axis.y * pts.volume[k];
+                    vol += pts.jacobian[k] * pts.volume[k];
+                }
+                let v0 = *v0.get_or_insert(vol);
+                records.push(Record {
+                    axial,
+                    volumetric: 1.0 - vol / v0,
+                    sin_phi: (syy - sxx) / (syy + sxx),
+                });
             }
-            let v0 = *v0.get_or_insert(vol);
-            records.push(Record {
-                axial,
-                volumetric: 1.0 - vol / v0,
-                sin_phi: (syy - sxx) / (syy + sxx),
-            });
+            (force, forces) = (0.0, 0);
         }
     }
     let (from, to) = (from.context("the window's start")?, to.context("the window's end")?);
@@ -884,6 +1156,47 @@ fn continuum_run(
     let strain: Vec<f64> = ids.iter().map(|id| to[id] - from[id].1).collect();
     let start: Vec<[f64; 2]> = ids.iter().map(|id| start[id]).collect();
     let found = inner_band(&x0, &strain, &start, EDGE_CELLS * cell_d * d, spacing, d, w.hypot(height))?;
+    let hybrid = match (hybrid, coupled, band_grains) {
+        (Some(_), Some(c), Some(band)) => {
+            let (from, to) = (
+                grains_from.context("the hybrid's window's start")?,
+                grains_to.context("the hybrid's window's end")?,
+            );
+            let (ids, x0, strain) = super::best_fit(&from, &to, d);
+            let start: Vec<[f64; 2]> = ids.iter().map(|id| band.start[id]).collect();
+            let found = inner_band(&x0, &strain, &start, EDGE_CELLS * cell_d * d, d, d, w.hypot(height))?;
+            // Within a cell of a continuum cell: any of eight points a cell away in one.
+            let near_continuum = |x: [f64; 2]| {
+                (0..8).any(|k| {
+                    let a = k as f64 * std::f64::consts::FRAC_PI_4;
+                    c.zone([x[0] + h * a.cos(), x[1] + h * a.sin(), 0.0]) == grains_oracle::Zone::Continuum
+                })
+            };
+            let at_interface = found.members.iter().filter(|&&i| near_continuum(x0[i])).count();
+            let strays = c
+                .positions()
+                .values()
+                .filter(|p| c.zone([p[0], p[1], 0.0]) == grains_oracle::Zone::Continuum)
+                .count();
+            Some(HybridBiaxial {
+                band,
+                substeps: c.substeps,
+                t_s: found.t_s,
+                length: found.length,
+                fwhm: found.fwhm,
+                angle: found.angle,
+                x0,
+                members: found.members,
+                at_interface,
+                strays,
+                shared_per_step: c.shared as f64 / c.steps.max(1) as f64,
+                momentum_error: c.momentum_error,
+                mass_change: c.mass_change,
+            })
+        }
+        (Some(_), ..) => anyhow::bail!("the oracle never fired: nothing enriched"),
+        _ => None,
+    };
     Ok(ContinuumBiaxial {
         cell: h,
         points: n,
@@ -896,7 +1209,17 @@ fn continuum_run(
         x0,
         records,
         wall: t0.elapsed().as_secs_f64(),
+        hybrid,
     })
+}
+
+/// The free grains' positions, by id.
+fn free_grains(c: &super::hybrid::Coupled) -> HashMap<u64, [f64; 2]> {
+    let g = &c.dem().grains;
+    (0..g.len())
+        .filter(|&i| !g.frozen[i])
+        .map(|i| (g.id[i], [g.x[i].x, g.x[i].y]))
+        .collect()
 }
 
 /// The top platen as a rigid, frictionless plane at `at` moving at `vy`, in contact with the
@@ -907,20 +1230,26 @@ fn continuum_run(
 /// restitution of 0.2 on its approach. The run takes the loads on the points' faces
 /// ([`PointLoads::Face`](grains_mpm::pipeline::PointLoads::Face)). A slip plane of the nodes
 /// clamps the rows of nodes it has passed, a cell into the material at most, and on these
-/// grids the oracle then fired where the band met the platen (docs/validation.md).
-fn platen(pts: &mut grains_mpm::points::Points<D2>, at: f64, vy: f64, reach: f64, stiffness: f64) {
+/// grids the oracle then fired where the band met the platen (docs/validation.md). A point of
+/// a hybrid cell is that share of the material there (its weight): its spring and mass are
+/// too. Returns the platen's force on the points (down positive).
+fn platen(pts: &mut grains_mpm::points::Points<D2>, at: f64, vy: f64, reach: f64, stiffness: f64) -> f64 {
     let e: f64 = 0.2;
     let zeta = -e.ln() / (std::f64::consts::PI.powi(2) + e.ln().powi(2)).sqrt();
     pts.loads.clear();
+    let mut total = 0.0;
     for k in 0..pts.len() {
         let overlap = pts.x[k].y + reach - at;
         if overlap > 0.0 {
+            let (k_n, m) = (stiffness * pts.weight[k], pts.mass[k] * pts.weight[k]);
             let approach = pts.v[k].y - vy;
-            let damping = 2.0 * zeta * (stiffness * pts.mass[k]).sqrt();
-            let f = (stiffness * overlap + damping * approach).max(0.0);
+            let damping = 2.0 * zeta * (k_n * m).sqrt();
+            let f = (k_n * overlap + damping * approach).max(0.0);
             pts.loads.push((k, D2::from_array([0.0, -f, 0.0])));
+            total += f;
         }
     }
+    total
 }
 
 #[cfg(test)]
