@@ -656,13 +656,13 @@ fn continuum(
     for (stem, caption, y_label, f) in [
         (
             "shear_biaxial_friction_continuum",
-            "Biaxial compression: the mobilised friction against the axial strain, DEM and continuum",
+            "Biaxial compression: the mobilised friction against the axial strain, DEM, continuum and hybrid",
             "phi = asin((s1 - s3) / (s1 + s3)) [deg]",
             (|x: &Record| x.sin_phi.asin().to_degrees()) as fn(&Record) -> f64,
         ),
         (
             "shear_biaxial_volume_continuum",
-            "Biaxial compression: the volumetric strain against the axial strain, DEM and continuum",
+            "Biaxial compression: the volumetric strain against the axial strain, DEM, continuum and hybrid",
             "volumetric strain [%] (compression +)",
             |x: &Record| 100.0 * x.volumetric,
         ),
