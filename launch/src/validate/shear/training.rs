@@ -69,7 +69,7 @@ pub(super) struct Enriched {
 /// on cells `h` high.
 pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, Vec<[f64; 2]>)], h: f64) -> anyhow::Result<Enriched> {
     use grains_dem::training;
-    use grains_oracle::{Zone, band_epoch, epoch, shear_band};
+    use grains_oracle::{Zone, band_epoch};
     let t0 = std::time::Instant::now();
     let (strain, continuum) = (at.strain, at.shear_stress);
     let d = dem.diameter;
@@ -82,25 +82,13 @@ pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, 
         period: [dem.width, 0.0, 0.0],
         grains: sample.iter().map(|&i| (D2::to_array(g0.x[i]), g0.radius[i])).collect(),
     };
-    let zones = shear_band::zones(&at.cells, 2, &at.flagged, PHI0_D * d, at.cells.h);
-    let previous = vec![Zone::Continuum; zones.len()];
-    let no_stress = std::collections::BTreeMap::new();
-    let input = epoch::Inputs {
-        nodes: &at.nodes,
-        kernel: at.kernel,
-        cells: &at.cells,
-        previous: &previous,
-        solid: &[],
-        clearance: &|_| f64::INFINITY,
-        grains: &[],
-        points: &at.points,
-        stress: &no_stress,
-    };
-    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, &packing, (WEIGHT, density), 0, None);
-    let before = epoch::totals(&at.cells, 2, &previous, WEIGHT, &[], &at.points);
-    let (mut new, mut points) = (Vec::new(), at.points.clone());
-    epoch::apply(&at.cells, 2, &plan, WEIGHT, density, &mut new, &mut points);
-    let after = epoch::totals(&at.cells, 2, &plan.zones, WEIGHT, &new, &points);
+    let Cut {
+        plan,
+        shift,
+        new,
+        before,
+        after,
+    } = cut_band(at, &packing, PHI0_D * d, density);
     let scale = before.0 * dem.speed;
     let enrichment = Enrichment {
         grains: new.len(),
@@ -111,7 +99,7 @@ pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, 
     };
     // The region the grains fill: the rows of cells that are not continuum.
     let nx = at.cells.nodes[0] as usize;
-    let rows: Vec<usize> = (0..zones.len())
+    let rows: Vec<usize> = (0..plan.zones.len())
         .filter(|&c| plan.zones[c] != Zone::Continuum)
         .map(|c| c / nx)
         .collect();
@@ -184,6 +172,51 @@ pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, 
         pipe,
         training,
     })
+}
+
+/// What [`cut_band`] did: the plan, the new grains' velocity change that keeps the momentum,
+/// the new grains, and the total (mass, momentum) before and after, as the solvers weigh them.
+pub(super) struct Cut {
+    pub(super) plan: grains_oracle::epoch::Plan,
+    pub(super) shift: [f64; 3],
+    pub(super) new: Vec<grains_oracle::epoch::Grain>,
+    pub(super) before: (f64, [f64; 3]),
+    pub(super) after: (f64, [f64; 3]),
+}
+
+/// Chen 2021 §4 at the oracle's detection `at`: the cells within `phi0` [m] of the flagged
+/// ones ([`shear_band::zones`](grains_oracle::shear_band::zones), the overlap one cell) take
+/// the `packing`'s grains of `density` [kg/m³] and the discrete ones lose their points
+/// ([`band_epoch::enrich`](grains_oracle::band_epoch::enrich), the points' share WEIGHT in a
+/// hybrid cell), every cell continuum before.
+pub(super) fn cut_band(at: &Detection, packing: &grains_oracle::band_epoch::Packing, phi0: f64, density: f64) -> Cut {
+    use grains_oracle::{Zone, band_epoch, epoch, shear_band};
+    let zones = shear_band::zones(&at.cells, 2, &at.flagged, phi0, at.cells.h);
+    let previous = vec![Zone::Continuum; zones.len()];
+    let no_stress = std::collections::BTreeMap::new();
+    let input = epoch::Inputs {
+        nodes: &at.nodes,
+        kernel: at.kernel,
+        cells: &at.cells,
+        previous: &previous,
+        solid: &[],
+        clearance: &|_| f64::INFINITY,
+        grains: &[],
+        points: &at.points,
+        stress: &no_stress,
+    };
+    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, packing, (WEIGHT, density), 0, None);
+    let before = epoch::totals(&at.cells, 2, &previous, WEIGHT, &[], &at.points);
+    let (mut new, mut points) = (Vec::new(), at.points.clone());
+    epoch::apply(&at.cells, 2, &plan, WEIGHT, density, &mut new, &mut points);
+    let after = epoch::totals(&at.cells, 2, &plan.zones, WEIGHT, &new, &points);
+    Cut {
+        plan,
+        shift,
+        new,
+        before,
+        after,
+    }
 }
 
 /// Kinematic training at each grid's detection (Fig. 13): the table and its checks.

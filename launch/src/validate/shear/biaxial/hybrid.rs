@@ -7,10 +7,9 @@
 
 use super::super::continuum::Detection;
 use super::super::hybrid::Parts;
-use super::super::training::WEIGHT;
 use super::*;
 use grains_grid::Grid;
-use grains_oracle::{Zone, band_epoch, epoch, shear_band};
+use grains_oracle::{Zone, band_epoch, epoch};
 
 /// Ids of the training's ring (not kept).
 const RING: u64 = 1 << 40;
@@ -117,25 +116,9 @@ pub(super) fn enrich_and_train(
         period: [0.0; 3],
         grains: sample_ids.iter().map(|&i| (D2::to_array(g0.x[i]), g0.radius[i])).collect(),
     };
-    let zones = shear_band::zones(&at.cells, 2, &at.flagged, phi0, at.cells.h);
-    let previous = vec![Zone::Continuum; zones.len()];
-    let no_stress = std::collections::BTreeMap::new();
-    let input = epoch::Inputs {
-        nodes: &at.nodes,
-        kernel: at.kernel,
-        cells: &at.cells,
-        previous: &previous,
-        solid: &[],
-        clearance: &|_| f64::INFINITY,
-        grains: &[],
-        points: &at.points,
-        stress: &no_stress,
-    };
-    let (plan, _) = band_epoch::enrich::<D2>(&input, &zones, &packing, (WEIGHT, density), 0, None);
-    let before = epoch::totals(&at.cells, 2, &previous, WEIGHT, &[], &at.points);
-    let (mut new, mut points) = (Vec::new(), at.points.clone());
-    epoch::apply(&at.cells, 2, &plan, WEIGHT, density, &mut new, &mut points);
-    let after = epoch::totals(&at.cells, 2, &plan.zones, WEIGHT, &new, &points);
+    let super::super::training::Cut {
+        plan, new, before, after, ..
+    } = super::super::training::cut_band(at, &packing, phi0, density);
     anyhow::ensure!(!new.is_empty(), "the enrichment cut no grains");
     let start: HashMap<u64, [f64; 2]> = new.iter().map(|g| (g.id, [g.x[0], g.x[1]])).collect();
     // The trained packing starts as the sample did, at rest (the enrichment's velocities are
