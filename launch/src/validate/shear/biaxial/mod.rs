@@ -652,7 +652,7 @@ fn continuum(
             &chart,
         )?;
     }
-    let hybrids = hybrid_report(dem, &model, scene.materials[material].density, d, args, part, md)?;
+    let hybrids = hybrid_report(dems, &model, scene.materials[material].density, d, args, part, md)?;
     for (stem, caption, y_label, f) in [
         (
             "shear_biaxial_friction_continuum",
@@ -687,12 +687,13 @@ fn continuum(
     Ok(())
 }
 
-/// The hybrid biaxial on seed 1's sample, once per continuum cell of `--biaxial-cells` (2 D50
+/// The hybrid biaxial on each DEM sample (compared with the DEM on it, as the planar shear's
+/// hybrids are: one sample does not fix a band to a few D50), once per continuum cell of `--biaxial-cells` (2 D50
 /// by default: on 4-D50 cells the continuum's failure starts under the platen,
 /// docs/validation.md), φ0 of `--biaxial-phi0` and transfer of `--shear-transfer`: its table,
 /// checks and band pictures. Returns each finished run's records, labelled.
 fn hybrid_report(
-    dem: &BiaxialRun,
+    dems: &[BiaxialRun],
     model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
     density: f64,
     d: f64,
@@ -703,8 +704,8 @@ fn hybrid_report(
     let _ = writeln!(
         md,
         "### Hybrid (Fig. 16–21)\n\nThe continuum above (on the cells named) until the oracle fires; then the cells \
-         within φ0 of the flagged ones (Table 6: 1 cm, 10 D50) enriched with seed {}'s DEM specimen as it stood before its \
-         shortening (less half a cell: discrete, the points deleted; the next cell: hybrid, w = {}), those grains trained \
+         within φ0 of the flagged ones (Table 6: 1 cm, 10 D50) enriched with the DEM specimen of a sample (each of seeds {}, \
+         each hybrid compared with the DEM on its sample) as it stood before its shortening (less half a cell: discrete, the points deleted; the next cell: hybrid, w = {}), those grains trained \
          from the start of the shortening to the detection (§4.1.1: a ring of the sample's grains in the continuum cells \
          around the region moves with the continuum's nodal velocity and is dropped after; the region's grains move \
          freely, the fluid's pressure on the free faces, the top wall coming down with the platen; the stress is \
@@ -715,20 +716,22 @@ fn hybrid_report(
          both at the same plane. σ1 is the platen's force on both over the width (the outer faces' area over the \
          height) plus p, from the start; the volume the area of points and grains in slabs. The band: App. A on the grains \
          over the window, counting those cut {EDGE_CELLS} cells or more inside the box of their places in the sample.\n\n\
-         | cells, φ0, transfer | grains cut (points deleted) | enrichment: mass, momentum | trained [σxx, σyy] (as cut; the continuum's there) | DEM substeps | t_s (App. A) | profile at half peak | inclination | band grains at a continuum cell | strays | peak φ (axial strain) | φ, ψ over the window | shared nodes a step | coupler's momentum error | mass change | wall |\n\
+         | seed, cells, φ0, transfer | grains cut (points deleted) | enrichment: mass, momentum | trained [σxx, σyy] (as cut; the continuum's there) | DEM substeps | t_s (App. A) | profile at half peak | inclination | band grains at a continuum cell | strays | peak φ (axial strain) | φ, ψ over the window | shared nodes a step | coupler's momentum error | mass change | wall |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-        dem.seed,
+        dems.iter().map(|r| r.seed.to_string()).collect::<Vec<_>>().join(", "),
         super::training::WEIGHT
     );
     let mut curves = Vec::new();
-    let runs = args.biaxial_cells.iter().flat_map(|&cells| {
-        args.biaxial_phi0
-            .iter()
-            .flat_map(move |&phi0| args.shear_transfers.iter().map(move |t| (cells, phi0, t)))
+    let runs = dems.iter().flat_map(|dem| {
+        args.biaxial_cells.iter().flat_map(move |&cells| {
+            args.biaxial_phi0
+                .iter()
+                .flat_map(move |&phi0| args.shear_transfers.iter().map(move |t| (dem, cells, phi0, t)))
+        })
     });
-    for (cells, phi0, transfer) in runs {
-        let name = format!("{cells}-D50 cells, φ0 {phi0} D50, {transfer}");
-        let stem = format!("shear_biaxial_band_hybrid_c{cells}_phi{phi0}_{transfer}").replace([':', '.'], "_");
+    for (dem, cells, phi0, transfer) in runs {
+        let name = format!("seed {}, {cells}-D50 cells, φ0 {phi0} D50, {transfer}", dem.seed);
+        let stem = format!("shear_biaxial_band_hybrid_s{}_c{cells}_phi{phi0}_{transfer}", dem.seed).replace([':', '.'], "_");
         let transfer = super::hybrid::transfer_named(transfer)?;
         let run = match continuum_run(dem, model, density, d, cells, Some((transfer, phi0))) {
             Ok(r) => r,
