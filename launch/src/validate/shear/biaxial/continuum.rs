@@ -312,7 +312,6 @@ fn hybrid_report(
     Ok(curves)
 }
 
-
 /// Side of the square of weak points at the right face [D50], the same material flaw on both
 /// grids. Chen gives no size; one cell of 2 D50 left two conjugate bands, 6 D50 one band
 /// (docs/validation.md).
@@ -577,7 +576,8 @@ fn continuum_run(
                         (dem.dt, GLUE_D * d, speed, travel, phi0_d * d),
                     )?;
                     history.records = Vec::new();
-                    let mut c = super::super::hybrid::Coupled::new(parts, &mut pts, &params, (cells, transfer, Some(fluid)), dt, dem.dt, None);
+                    let mut c =
+                        super::super::hybrid::Coupled::new(parts, &mut pts, &params, (cells, transfer, Some(fluid)), dt, dem.dt, None);
                     // The grains' platen where the points' is.
                     if let grains_dem::state::WallShape::Plane { point, .. } = &mut c.dem_mut().walls[1].shape {
                         *point = D2::from_array([0.0, height - travel, 0.0]);
