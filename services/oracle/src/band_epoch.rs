@@ -173,6 +173,44 @@ fn packing_grains(dim: usize, need: &BTreeSet<usize>, cells: &grains_grid::Grid,
         .collect()
 }
 
+/// Where the material a training must supply started (Chen 2021 §4.1.1: the prepared packing
+/// is the material at the start, so the grains for the cells `need` are cut where that
+/// material was): the cells of the start positions of the points now in `need` (`moved`: each
+/// point's position now and at the start), and a ring of one cell around them (its grains are
+/// driven with the continuum's motion, the inner ones move freely). Returns (start, ring).
+pub fn training_cells(
+    cells: &grains_grid::Grid,
+    dim: usize,
+    need: &BTreeSet<usize>,
+    moved: impl IntoIterator<Item = ([f64; 3], [f64; 3])>,
+) -> (BTreeSet<usize>, BTreeSet<usize>) {
+    let start: BTreeSet<usize> = moved
+        .into_iter()
+        .filter(|(now, _)| cell_of(cells, dim, *now).is_some_and(|c| need.contains(&c)))
+        .filter_map(|(_, then)| cell_of(cells, dim, then))
+        .collect();
+    let n = dims(cells, dim);
+    let mut ring = BTreeSet::new();
+    for &c in &start {
+        let ijk = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
+        let span = |k: usize| if k < dim { -1i64..=1 } else { 0..=0 };
+        for dz in span(2) {
+            for dy in span(1) {
+                for dx in span(0) {
+                    let m = [ijk[0] as i64 + dx, ijk[1] as i64 + dy, ijk[2] as i64 + dz];
+                    if (0..3).all(|k| m[k] >= 0 && (m[k] as usize) < n[k]) {
+                        let d = crate::linear(n, m.map(|v| v as usize));
+                        if !start.contains(&d) {
+                            ring.insert(d);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    (start, ring)
+}
+
 /// The box around the cells `set`.
 pub fn bounding_box(cells: &grains_grid::Grid, dim: usize, set: &BTreeSet<usize>) -> ([f64; 3], [f64; 3]) {
     let n = dims(cells, dim);
@@ -319,6 +357,46 @@ mod tests {
     use crate::epoch::{Grain, Point};
     use crate::shear_band::zones;
     use grains_grid::{D2, Grid, Kernel};
+
+    /// The training's cells follow the material back to where it started: points moved by
+    /// one and a half cells in x and half a cell down (their start positions, three per cell
+    /// and axis) now in a block of 3 × 2 cells started in the 4 × 3 cells that block spans
+    /// shifted back; the ring is the 8 neighbours of those and no cell of them; points not
+    /// in the block are not followed. In 3D the same with a block of one cell: the ring is
+    /// its 26 neighbours.
+    #[test]
+    fn the_training_starts_where_the_material_was() {
+        let h = 1.0;
+        let cells = Grid {
+            origin: [0.0; 3],
+            h,
+            nodes: [12, 10, 1],
+            period: [0, 0, 0],
+        };
+        let index = |i: usize, j: usize| j * 12 + i;
+        let need: BTreeSet<usize> = [(6, 5), (7, 5), (8, 5), (6, 6), (7, 6), (8, 6)].map(|(i, j)| index(i, j)).into();
+        let shift = [1.5 * h, -0.5 * h, 0.0];
+        let moved: Vec<([f64; 3], [f64; 3])> = (0..36)
+            .flat_map(|a| (0..30).map(move |b| [(a as f64 + 0.5) * h / 3.0, (b as f64 + 0.5) * h / 3.0, 0.0]))
+            .map(|now| (now, [now[0] - shift[0], now[1] - shift[1], 0.0]))
+            .collect();
+        let (start, ring) = training_cells(&cells, 2, &need, moved);
+        // x from [6, 9) back 1.5 → [4.5, 7.5): cells 4..=7; y from [5, 7) up 0.5 → [5.5, 7.5): 5..=7.
+        let want: BTreeSet<usize> = (4..=7).flat_map(|i| (5..=7).map(move |j| index(i, j))).collect();
+        assert_eq!(start, want);
+        let around: BTreeSet<usize> = (3..=8)
+            .flat_map(|i| (4..=8).map(move |j| index(i, j)))
+            .filter(|c| !want.contains(c))
+            .collect();
+        assert_eq!(ring, around);
+
+        let cells = Grid { nodes: [5, 5, 5], ..cells };
+        let need: BTreeSet<usize> = [2 * 25 + 2 * 5 + 2].into();
+        let (start, ring) = training_cells(&cells, 3, &need, [([2.5, 2.5, 2.5], [1.5, 2.5, 2.5])]);
+        assert_eq!(start, [2 * 25 + 2 * 5 + 1].into());
+        assert_eq!(ring.len(), 26);
+        assert!(!ring.contains(&(2 * 25 + 2 * 5 + 1)));
+    }
 
     /// Shear rate of the continuum [1/s] about y = 16 mm, and its uniform vertical velocity.
     const RATE: f64 = 10.0;

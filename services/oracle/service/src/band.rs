@@ -235,37 +235,14 @@ impl BandState {
         now: f64,
     ) -> anyhow::Result<Vec<NewGrain>> {
         let dim = S::DIM;
-        let n: [usize; 3] = std::array::from_fn(|k| if k < dim { cells.nodes[k] as usize } else { 1 });
         // The cells the material now in `need` started in, and a ring of one cell around them.
-        let mut start = BTreeSet::new();
-        for p in points.iter().filter(|p| p.flags & EPOCH_FIXED == 0) {
-            if cell_of(cells, dim, p.position).is_some_and(|c| need.contains(&c))
-                && let Ok(k) = self.origin.binary_search_by_key(&p.id, |o| o.0)
-                && let Some(c) = cell_of(cells, dim, self.origin[k].1)
-            {
-                start.insert(c);
-            }
-        }
+        let moved = points.iter().filter(|p| p.flags & EPOCH_FIXED == 0).filter_map(|p| {
+            let k = self.origin.binary_search_by_key(&p.id, |o| o.0).ok()?;
+            Some((p.position, self.origin[k].1))
+        });
+        let (start, ring) = grains_oracle::band_epoch::training_cells(cells, dim, need, moved);
         if start.is_empty() {
             return Ok(Vec::new());
-        }
-        let mut ring = BTreeSet::new();
-        for &c in &start {
-            let ijk = [c % n[0], (c / n[0]) % n[1], c / (n[0] * n[1])];
-            let span = |k: usize| if k < dim { -1i64..=1 } else { 0..=0 };
-            for dz in span(2) {
-                for dy in span(1) {
-                    for dx in span(0) {
-                        let m = [ijk[0] as i64 + dx, ijk[1] as i64 + dy, ijk[2] as i64 + dz];
-                        if (0..3).all(|k| m[k] >= 0 && (m[k] as usize) < n[k]) {
-                            let d = (m[2] as usize * n[1] + m[1] as usize) * n[0] + m[0] as usize;
-                            if !start.contains(&d) {
-                                ring.insert(d);
-                            }
-                        }
-                    }
-                }
-            }
         }
         let all: BTreeSet<usize> = start.union(&ring).copied().collect();
         let (lo, hi) = grains_oracle::band_epoch::bounding_box(cells, dim, &all);
