@@ -88,7 +88,7 @@ pub(super) fn enrich_and_train(dem: &DemShear, at: &Detection, history: &[(f64, 
         new,
         before,
         after,
-    } = cut_band(at, &packing, PHI0_D * d, density);
+    } = cut_band(at, &packing, PHI0_D * d, density, None);
     let scale = before.0 * dem.speed;
     let enrichment = Enrichment {
         grains: new.len(),
@@ -188,8 +188,15 @@ pub(super) struct Cut {
 /// ones ([`shear_band::zones`](grains_oracle::shear_band::zones), the overlap one cell) take
 /// the `packing`'s grains of `density` [kg/m³] and the discrete ones lose their points
 /// ([`band_epoch::enrich`](grains_oracle::band_epoch::enrich), the points' share WEIGHT in a
-/// hybrid cell), every cell continuum before.
-pub(super) fn cut_band(at: &Detection, packing: &grains_oracle::band_epoch::Packing, phi0: f64, density: f64) -> Cut {
+/// hybrid cell), every cell continuum before. With `train`, the grains are what it returns for
+/// the cells that need them (kinematic training: `band_epoch::enrich`'s).
+pub(super) fn cut_band(
+    at: &Detection,
+    packing: &grains_oracle::band_epoch::Packing,
+    phi0: f64,
+    density: f64,
+    train: Option<grains_oracle::band_epoch::Train<'_>>,
+) -> Cut {
     use grains_oracle::{Zone, band_epoch, epoch, shear_band};
     let zones = shear_band::zones(&at.cells, 2, &at.flagged, phi0, at.cells.h);
     let previous = vec![Zone::Continuum; zones.len()];
@@ -205,7 +212,7 @@ pub(super) fn cut_band(at: &Detection, packing: &grains_oracle::band_epoch::Pack
         points: &at.points,
         stress: &no_stress,
     };
-    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, packing, (WEIGHT, density), 0, None);
+    let (plan, shift) = band_epoch::enrich::<D2>(&input, &zones, packing, (WEIGHT, density), 0, train);
     let before = epoch::totals(&at.cells, 2, &previous, WEIGHT, &[], &at.points);
     let (mut new, mut points) = (Vec::new(), at.points.clone());
     epoch::apply(&at.cells, 2, &plan, WEIGHT, density, &mut new, &mut points);

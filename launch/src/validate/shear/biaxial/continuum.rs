@@ -161,11 +161,89 @@ pub(super) fn continuum(
                     runs.iter()
                         .map(|r| line(format!("continuum, {:.0}-D50 cells", r.cell / d), &r.records)),
                 )
-                .chain(hybrids.iter().map(|(name, records)| line(name.clone(), records)))
+                .chain(hybrids.iter().map(|h| line(h.name.clone(), &h.records)))
                 .collect(),
             ..Chart::default()
         };
         part.chart(&args.out, stem, caption, &chart)?;
+    }
+    band_volume_report(dems, &hybrids, args, part, md)
+}
+
+/// Chen Fig. 17 (right): the volumetric strain in the band only, the DEM's on each sample and
+/// the hybrids' from their enrichment on, each in App. A's box of its own band; the values at
+/// the window's ends and a chart per sample.
+fn band_volume_report(
+    dems: &[BiaxialRun],
+    hybrids: &[HybridCurves],
+    args: &super::super::ValidateArgs,
+    part: &mut Part,
+    md: &mut String,
+) -> anyhow::Result<()> {
+    let at = |curve: &[[f64; 2]], axial: f64| {
+        curve
+            .iter()
+            .find(|p| p[0] >= axial)
+            .or(curve.last())
+            .map_or(f64::NAN, |p| 100.0 * p[1])
+    };
+    let _ = writeln!(
+        md,
+        "#### The volume in the band (Fig. 17, right)\n\nThe grains' area in App. A's box of each run's own band (the box as found \
+         over the window, fixed in space; each disk clipped by its sides) over the box's area, Φ, against the sample's at the \
+         start of the shortening in the same box, Φ0: ε_v = 1 − Φ0 / Φ (compression positive, dilation negative), every \
+         {:.2}% of axial strain; the hybrid's from its enrichment on (before it there are no grains). Where a hybrid's box \
+         reaches into continuum cells, which hold no grains, it reads the packing low.\n\n\
+         | run | ε_v in the band at {:.1}% of axial strain | at the end | the specimen's at the end | the box in continuum cells |\n\
+         |---|---:|---:|---:|---:|",
+        100.0 * SNAPSHOT,
+        100.0 * WINDOW.0
+    );
+    let end = |records: &[Record]| records.last().map_or(f64::NAN, |x| 100.0 * x.volumetric);
+    for r in dems {
+        let _ = writeln!(
+            md,
+            "| DEM, seed {} | {:.2}% | {:.2}% | {:.2}% | |",
+            r.seed,
+            at(&r.band_volume, WINDOW.0),
+            at(&r.band_volume, f64::INFINITY),
+            end(&r.records)
+        );
+    }
+    for h in hybrids {
+        let _ = writeln!(
+            md,
+            "| {} | {:.2}% | {:.2}% | {:.2}% | {:.0}% |",
+            h.name,
+            at(&h.band_volume, WINDOW.0),
+            at(&h.band_volume, f64::INFINITY),
+            end(&h.records),
+            100.0 * h.box_in_continuum
+        );
+    }
+    let _ = writeln!(md);
+    let line =
+        |name: String, curve: &[[f64; 2]]| Series::new(name, Kind::Line, curve.iter().map(|p| (100.0 * p[0], 100.0 * p[1])).collect());
+    for r in dems {
+        let caption = format!(
+            "Biaxial compression, seed {}: the volume in the band, DEM and hybrid (Chen Fig. 17, right)",
+            r.seed
+        );
+        let chart = Chart {
+            title: format!("Volume in the band, seed {} (Chen Fig. 17, right)", r.seed),
+            x_label: "axial strain [%]".into(),
+            y_label: "volumetric strain in the band [%] (compression +)".into(),
+            series: std::iter::once(line("DEM".into(), &r.band_volume))
+                .chain(
+                    hybrids
+                        .iter()
+                        .filter(|h| h.seed == r.seed)
+                        .map(|h| line(h.name.clone(), &h.band_volume)),
+                )
+                .collect(),
+            ..Chart::default()
+        };
+        part.chart(&args.out, &format!("shear_biaxial_band_volume_s{}", r.seed), caption, &chart)?;
     }
     Ok(())
 }
@@ -183,16 +261,18 @@ fn hybrid_report(
     args: &super::super::ValidateArgs,
     part: &mut Part,
     md: &mut String,
-) -> anyhow::Result<Vec<(String, Vec<Record>)>> {
+) -> anyhow::Result<Vec<HybridCurves>> {
     let _ = writeln!(
         md,
         "### Hybrid (Fig. 16–21)\n\nThe continuum above (on the cells named) until the oracle fires; then the cells \
          within φ0 of the flagged ones (Table 6: 1 cm, 10 D50) enriched with the DEM specimen of a sample (each of seeds {}, \
-         each hybrid compared with the DEM on its sample) as it stood before its shortening (less half a cell: discrete, the points deleted; the next cell: hybrid, w = {}), those grains trained \
-         from the start of the shortening to the detection (§4.1.1: a ring of the sample's grains in the continuum cells \
-         around the region moves with the continuum's nodal velocity and is dropped after; the region's grains move \
-         freely, the fluid's pressure on the free faces, the top wall coming down with the platen; the stress is \
-         Love–Weber's over region and ring), and the two models coupled \
+         each hybrid compared with the DEM on its sample) as it stood before its shortening (less half a cell: discrete, the points deleted; the next cell: hybrid, w = {}): \
+         the grains of the cells where the material of those cells started (the points' places at the start of the \
+         shortening), trained from there to the detection (§4.1.1: a ring of the sample's grains in the cells around \
+         them moves with the continuum's nodal velocity and is dropped after; the inner grains move freely, the fluid's \
+         pressure on the free faces, the top wall coming down with the platen; the stress is Love–Weber's over the \
+         trained grains and ring), those that end in the cells that need them kept at the continuum's velocity there \
+         (`band_epoch::enrich`'s cut, as the runtime's), and the two models coupled \
          every step (the DEM's substeps, the coupler's common velocity on the shared nodes, the grains' transfer back as \
          named). The fluid's pressure acts on both models' faces (the points' `ambient_pressure`, the grains' \
          `grains_dem::fluid`), the platen on the points by contact (× their weight) and on the grains as the DEM's wall, \
@@ -306,10 +386,26 @@ fn hybrid_report(
             format!("Biaxial compression (hybrid, `{name}`): the grains App. A counts in the band"),
             &chart,
         )?;
-        curves.push((format!("hybrid, {name}"), run.records.clone()));
+        curves.push(HybridCurves {
+            name: format!("hybrid, {name}"),
+            seed: dem.seed,
+            records: run.records.clone(),
+            band_volume: h.band_volume.clone(),
+            box_in_continuum: h.box_in_continuum,
+        });
     }
     let _ = writeln!(md);
     Ok(curves)
+}
+
+/// A hybrid's name, its sample's seed, its records, its band's volume ([`band_volume`]) and
+/// the share of the band's box in continuum cells.
+struct HybridCurves {
+    name: String,
+    seed: u64,
+    records: Vec<Record>,
+    band_volume: Vec<[f64; 2]>,
+    box_in_continuum: f64,
 }
 
 /// Side of the square of weak points at the right face [D50], the same material flaw on both
@@ -344,6 +440,11 @@ struct ContinuumBiaxial {
 /// training, and the coupling's bookkeeping.
 struct HybridBiaxial {
     band: super::hybrid::BandGrains,
+    /// The band's volumetric strain against the axial strain from the enrichment on
+    /// ([`band_volume`]; the sample's grains at the start of the shortening its reference).
+    band_volume: Vec<[f64; 2]>,
+    /// The share of that band's box in continuum cells at the end.
+    box_in_continuum: f64,
     substeps: usize,
     t_s: f64,
     length: f64,
@@ -459,9 +560,15 @@ fn continuum_run(
     // after it, the enrichment, the grains at the window's ends, the platen's force summed
     // since the last record (points and grains) and the area at the start of the shortening.
     let mut history = super::hybrid::NodeHistory { grid, records: Vec::new() };
+    // The points' positions at the start of the shortening, by id: where the material the
+    // enrichment needs started (the training's packing is the DEM sample's then).
+    let mut origin: Option<HashMap<u64, [f64; 2]>> = None;
     let mut coupled: Option<super::super::hybrid::Coupled> = None;
     let mut band_grains = None;
     let (mut grains_from, mut grains_to) = (None, None);
+    // The hybrid's grains every SNAPSHOT of axial strain from the enrichment on (the band's
+    // volume).
+    let (mut snapshots, mut next_snapshot) = (Vec::new(), 0.0);
     let (mut force, mut forces, mut a0) = (0.0, 0usize, None);
     let fluid = grains_dem::fluid::Fluid {
         pressure: PRESSURE,
@@ -477,6 +584,9 @@ fn continuum_run(
             break;
         }
         let pressing = step >= settle;
+        if pressing && hybrid.is_some() && origin.is_none() {
+            origin = Some((0..pts.len()).map(|k| (pts.id[k], [pts.x[k].x, pts.x[k].y])).collect());
+        }
         if pressing && from.is_none() && axial >= WINDOW.0 {
             from = Some(
                 (0..pts.len())
@@ -484,6 +594,12 @@ fn continuum_run(
                     .collect(),
             );
             grains_from = coupled.as_ref().map(free_grains);
+        }
+        if let Some(c) = coupled.as_ref()
+            && axial >= next_snapshot
+        {
+            snapshots.push((axial, disks(c.dem())));
+            next_snapshot = ((axial / SNAPSHOT).floor() + 1.0) * SNAPSHOT;
         }
         if pressing && to.is_none() && axial >= WINDOW.1 {
             to = Some((0..pts.len()).map(|k| (pts.id[k], pts.plastic_strain[k])).collect());
@@ -570,6 +686,7 @@ fn continuum_run(
                     let (parts, grains) = super::hybrid::enrich_and_train(
                         &dem.sample,
                         &detection,
+                        origin.as_ref().context("the points' places at the start of the shortening")?,
                         &stress,
                         &history,
                         (duration, &fluid),
@@ -643,7 +760,14 @@ fn continuum_run(
     let hybrid = match (hybrid, coupled, band_grains) {
         (Some(_), Some(c), Some(band)) => {
             let (from, to) = (
-                grains_from.context("the hybrid's window's start")?,
+                grains_from.with_context(|| {
+                    let at = detected.map_or(f64::NAN, |d| d.0);
+                    format!(
+                        "the oracle fired at {:.2}% of axial strain, after the band's window starts ({:.1}%): no grains to measure the band on",
+                        100.0 * at,
+                        100.0 * WINDOW.0
+                    )
+                })?,
                 grains_to.context("the hybrid's window's end")?,
             );
             let (ids, x0, strain) = super::super::best_fit(&from, &to, d);
@@ -662,7 +786,26 @@ fn continuum_run(
                 .values()
                 .filter(|p| c.zone([p[0], p[1], 0.0]) == grains_oracle::Zone::Continuum)
                 .count();
+            // The share of the band's box in continuum cells at the end (no grains there: the
+            // box then reads the grains' packing low), on a lattice of 40 × 40 points in it.
+            let b = &found.bbox;
+            let normal = [-b.dir[1], b.dir[0]];
+            let in_continuum = (0..1600)
+                .filter(|k| {
+                    let (u, v) = ((k % 40) as f64 / 39.0 * 2.0 - 1.0, (k / 40) as f64 / 39.0 * 2.0 - 1.0);
+                    let (a, t) = (u * b.half[0], v * b.half[1]);
+                    let x = [
+                        b.centre[0] + a * b.dir[0] + t * normal[0],
+                        b.centre[1] + a * b.dir[1] + t * normal[1],
+                        0.0,
+                    ];
+                    c.zone(x) == grains_oracle::Zone::Continuum
+                })
+                .count() as f64
+                / 1600.0;
             Some(HybridBiaxial {
+                band_volume: band_volume(&found.bbox, &disks(&dem.sample), &snapshots),
+                box_in_continuum: in_continuum,
                 band,
                 substeps: c.substeps,
                 t_s: found.t_s,

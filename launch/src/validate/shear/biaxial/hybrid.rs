@@ -1,7 +1,8 @@
 //! The hybrid biaxial compression (Chen 2021 §6.2, Fig. 16–18 middle): the continuum until the
-//! oracle fires, then the cells within φ0 of the band enriched with seed 1's DEM sample as it
-//! stood before the shortening, those grains trained through the continuum's motion up to the
-//! detection (§4.1.1), and the two models coupled on the shared nodes every step. The fluid's
+//! oracle fires, then the cells within φ0 of the band enriched with a DEM sample as it stood
+//! before the shortening, its grains taken where that material started and trained through
+//! the continuum's motion up to the detection (§4.1.1), and the two models coupled on the
+//! shared nodes every step. The fluid's
 //! pressure holds both models' free faces; the platen presses the points (by contact) and the
 //! grains (the DEM's wall) alike. In process, as the planar shear's hybrid ([`super::super::hybrid`]).
 
@@ -10,6 +11,7 @@ use super::super::hybrid::Parts;
 use super::*;
 use grains_grid::Grid;
 use grains_oracle::{Zone, band_epoch, epoch};
+use std::collections::BTreeSet;
 
 /// Ids of the training's ring (not kept).
 const RING: u64 = 1 << 40;
@@ -89,17 +91,22 @@ pub(super) struct BandGrains {
 }
 
 /// Enriches the continuum `at` its detection, the cells within `phi0` [m] of the flagged ones,
-/// with `sample`'s grains (the DEM specimen before
-/// its shortening: a packing of the same box, not repeated) and trains them from the start of
-/// the shortening to `duration` with `history`: a ring of the sample's grains in the continuum
-/// cells around the region moves with the continuum's velocity there, the region's grains
-/// freely, in `fluid` at the free faces; grains under `glue` stay glued; the top wall comes down
-/// by the platen's `travel` at a steady speed. Returns the plan, the trained state (the
-/// sample's walls: the bottom, and the top where the points' platen is) with its pipeline,
-/// and what it did. `stress`: each of `at`'s points' [τxx, τyy] and volume.
+/// with `sample`'s grains (the DEM specimen before its shortening: a packing of the same box,
+/// not repeated), trained from the start of the shortening to `duration` with `history`
+/// (Chen §4.1.1, as the runtime's band training): the cells the material now in the cells that
+/// need grains started in (`origin`: the points' positions at the start of the shortening, by
+/// id) take the sample's grains, which move freely, and a ring of the sample's grains in the
+/// cells around those moves with the continuum's velocity there, in `fluid` at the free faces;
+/// grains under `glue` stay glued; the top wall comes down by the platen's `travel` at a steady
+/// speed. The trained grains whose centres end in the cells that need them are the new grains
+/// (`band_epoch::enrich`'s cut: they take the continuum's velocity there). Returns the plan,
+/// the DEM state (the sample's walls: the bottom, and the top where the points' platen is)
+/// with its pipeline, and what it did. `stress`: each of `at`'s points' [τxx, τyy] and volume.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn enrich_and_train(
     sample: &DemState<D2>,
     at: &Detection,
+    origin: &HashMap<u64, [f64; 2]>,
     stress: &[([f64; 2], f64)],
     history: &NodeHistory,
     (duration, fluid): (f64, &grains_dem::fluid::Fluid),
@@ -110,103 +117,126 @@ pub(super) fn enrich_and_train(
     let g0 = &sample.grains;
     let sample_ids: Vec<usize> = (0..g0.len()).filter(|&i| g0.id[i] < super::MEMBRANE).collect();
     let first = *sample_ids.first().context("an empty DEM sample")?;
+    let material = g0.material[first];
     let density = g0.mass[first] / (std::f64::consts::PI * g0.radius[first].powi(2));
     let packing = band_epoch::Packing {
         min: [0.0; 3],
         period: [0.0; 3],
         grains: sample_ids.iter().map(|&i| (D2::to_array(g0.x[i]), g0.radius[i])).collect(),
     };
-    let super::super::training::Cut {
-        plan, new, before, after, ..
-    } = super::super::training::cut_band(at, &packing, phi0, density);
-    anyhow::ensure!(!new.is_empty(), "the enrichment cut no grains");
-    let start: HashMap<u64, [f64; 2]> = new.iter().map(|g| (g.id, [g.x[0], g.x[1]])).collect();
-    // The trained packing starts as the sample did, at rest (the enrichment's velocities are
-    // the continuum's at the detection; the training ends with the continuum's motion).
-    let mut state = sample.clone();
-    state.grains = Default::default();
-    for g in &new {
-        let i = state.grains.push(g.id, D2::from_array(g.x), g.radius, g.mass, g0.material[first]);
-        state.grains.frozen[i] = g.x[1] < glue;
-    }
-    // The driven shell is a ring outside the region (the runtime's, `grains-oracle-service`'s
-    // band training): the sample's grains in the continuum cells next to it, dropped after the
-    // training. Driving the region's own outer grains instead packed them into each other
-    // along its faces (two driven grains do not push each other apart: the continuum's 2% of
-    // shortening along a face is 20 µm of overlap between 1-mm neighbours) and they burst
-    // out at 1–2 m/s when released. The specimen's free faces take the fluid's pressure,
-    // its load at the start (the faces move by a few percent of a D50 meanwhile); the top wall
-    // comes down with the platen.
-    let nx = at.cells.nodes[0] as i64;
-    let ny = at.cells.nodes[1] as i64;
-    let ring_cell = |c: usize| {
-        plan.zones[c] == Zone::Continuum
-            && (-1..=1).any(|dj| {
-                (-1..=1).any(|di| {
-                    let (i, j) = ((c as i64 % nx) + di, (c as i64 / nx) + dj);
-                    (0..nx).contains(&i) && (0..ny).contains(&j) && plan.zones[(j * nx + i) as usize] != Zone::Continuum
-                })
-            })
-    };
-    let mut shell = Vec::new();
-    for &i in &sample_ids {
-        let x = D2::to_array(g0.x[i]);
-        if epoch::cell_of(&at.cells, 2, x).is_some_and(ring_cell) {
-            let id = RING + shell.len() as u64;
-            let k = state.grains.push(id, g0.x[i], g0.radius[i], g0.mass[i], g0.material[first]);
-            state.grains.frozen[k] = x[1] < glue;
-            shell.push(id);
-        }
-    }
-    state.grains.external = grains_dem::fluid::forces(&state.grains, fluid).0;
     let faces = sample_ids
         .iter()
         .fold([f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY], |f, &i| {
             let (x, r) = (g0.x[i], g0.radius[i]);
             [f[0].min(x.x - r), f[1].max(x.x + r), f[2].max(x.y + r)]
         });
-    let area = {
+    let sample_area: f64 = sample_ids.iter().map(|&i| std::f64::consts::PI * g0.radius[i].powi(2)).sum();
+    // What the training did: the trained grains (not the ring) with their places in the
+    // sample, and the packing's stress as cut and as trained.
+    let mut trained_grains: Vec<([f64; 2], [f64; 2])> = Vec::new();
+    let (mut untrained, mut trained) = ([0.0; 2], [0.0; 2]);
+    // The packing as cut and as trained each in a pipeline of its own.
+    let mut pipes = (grains_dem::DemPipeline::<D2>::new(2)?, grains_dem::DemPipeline::<D2>::new(2)?);
+    let mut train = |need: &BTreeSet<usize>| -> Vec<grains_oracle::epoch::NewGrain> {
+        // The cells the material now in `need` started in, and a ring of one cell around them.
+        let moved = at.points.iter().filter_map(|p| origin.get(&p.id).map(|x| (p.x, [x[0], x[1], 0.0])));
+        let (start, ring) = band_epoch::training_cells(&at.cells, 2, need, moved);
+        // The trained packing starts as the sample did, at rest. The ring moves with the
+        // continuum and is dropped after: driving the region's own outer grains instead
+        // packed them into each other along its faces (two driven grains do not push each
+        // other apart: the continuum's 2% of shortening along a face is 20 µm of overlap
+        // between 1-mm neighbours) and they burst out at 1–2 m/s when released. The
+        // specimen's free faces take the fluid's pressure, its load at the start (the faces
+        // move by a few percent of a D50 meanwhile); the top wall comes down with the platen.
+        let mut state = sample.clone();
+        state.grains = Default::default();
+        let mut shell = Vec::new();
+        for &i in &sample_ids {
+            let x = D2::to_array(g0.x[i]);
+            let Some(c) = epoch::cell_of(&at.cells, 2, x) else { continue };
+            let id = if start.contains(&c) {
+                g0.id[i]
+            } else if ring.contains(&c) {
+                let id = RING + shell.len() as u64;
+                shell.push(id);
+                id
+            } else {
+                continue;
+            };
+            let k = state.grains.push(id, g0.x[i], g0.radius[i], g0.mass[i], material);
+            state.grains.frozen[k] = x[1] < glue;
+        }
+        state.grains.external = grains_dem::fluid::forces(&state.grains, fluid).0;
+        let area = {
+            let g = &state.grains;
+            let grains: f64 = (0..g.len()).map(|i| std::f64::consts::PI * g.radius[i].powi(2)).sum();
+            grains * (faces[1] - faces[0]) * faces[2] / sample_area
+        };
+        let love_weber = |pipe: &grains_dem::DemPipeline<D2>, st: &DemState<D2>| {
+            let s = crate::calibrate::shear::love_weber(pipe, st, area);
+            [s[0], s[1]]
+        };
+        let mut cut = state.clone();
+        training::train(&mut pipes.0, &mut cut, &shell, |_, _| D2::from_array([0.0; 3]), dem_dt, 1);
+        untrained = love_weber(&pipes.0, &cut);
+        let pipe = &mut pipes.1;
+        let steps = (duration / dem_dt).round() as usize;
+        state.walls[1].velocity = D2::from_array([0.0, -travel / (steps as f64 * dem_dt), 0.0]);
+        training::train(
+            pipe,
+            &mut state,
+            &shell,
+            |x, t| {
+                let v = history.velocity([x.x, x.y], t);
+                D2::from_array([v[0], v[1], 0.0])
+            },
+            dem_dt,
+            steps,
+        );
+        trained = love_weber(pipe, &state);
         let g = &state.grains;
-        let grains: f64 = (0..g.len()).map(|i| std::f64::consts::PI * g.radius[i].powi(2)).sum();
-        let sample_area: f64 = sample_ids.iter().map(|&i| std::f64::consts::PI * g0.radius[i].powi(2)).sum();
-        grains * (faces[1] - faces[0]) * faces[2] / sample_area
+        let places: HashMap<u64, [f64; 2]> = sample_ids.iter().map(|&i| (g0.id[i], [g0.x[i].x, g0.x[i].y])).collect();
+        let inside = (0..g.len()).filter(|&i| g.id[i] < RING);
+        trained_grains = inside.clone().map(|i| ([g.x[i].x, g.x[i].y], places[&g.id[i]])).collect();
+        inside
+            .map(|i| grains_oracle::epoch::NewGrain {
+                id: 0,
+                x: D2::to_array(g.x[i]),
+                radius: g.radius[i],
+                v: D2::to_array(g.v[i]),
+            })
+            .collect()
     };
-    let love_weber = |pipe: &grains_dem::DemPipeline<D2>, st: &DemState<D2>| {
-        let s = crate::calibrate::shear::love_weber(pipe, st, area);
-        [s[0], s[1]]
-    };
-    let mut cut = state.clone();
-    let mut pipe = grains_dem::DemPipeline::<D2>::new(2)?;
-    training::train(&mut pipe, &mut cut, &shell, |_, _| D2::from_array([0.0; 3]), dem_dt, 1);
-    let untrained = love_weber(&pipe, &cut);
-    let mut pipe = grains_dem::DemPipeline::<D2>::new(2)?;
-    let steps = (duration / dem_dt).round() as usize;
-    state.walls[1].velocity = D2::from_array([0.0, -travel / (steps as f64 * dem_dt), 0.0]);
-    training::train(
-        &mut pipe,
-        &mut state,
-        &shell,
-        |x, t| {
-            let v = history.velocity([x.x, x.y], t);
-            D2::from_array([v[0], v[1], 0.0])
-        },
-        dem_dt,
-        steps,
-    );
-    let trained = love_weber(&pipe, &state);
-    state.walls[1].velocity = D2::from_array([0.0; 3]);
-    let keep: Vec<u32> = (0..state.grains.len() as u32)
-        .filter(|&i| state.grains.id[i as usize] < RING)
+    let super::super::training::Cut {
+        plan, new, before, after, ..
+    } = super::super::training::cut_band(at, &packing, phi0, density, Some(&mut train));
+    anyhow::ensure!(!new.is_empty(), "the enrichment cut no grains");
+    // Each new grain's place in the sample: the trained grain it is (the cut keeps a grain's
+    // place, or moves it by less than a diameter out of a grain already there).
+    let start: HashMap<u64, [f64; 2]> = new
+        .iter()
+        .map(|g| {
+            let nearest = trained_grains
+                .iter()
+                .min_by(|a, b| {
+                    let d = |p: &[f64; 2]| (p[0] - g.x[0]).powi(2) + (p[1] - g.x[1]).powi(2);
+                    d(&a.0).total_cmp(&d(&b.0))
+                })
+                .map_or([g.x[0], g.x[1]], |t| t.1);
+            (g.id, nearest)
+        })
         .collect();
-    state.grains.permute(&keep);
-    state.grains.external = vec![D2::from_array([0.0; 3]); state.grains.len()];
-    pipe.invalidate();
-    for i in 0..state.grains.len() {
-        if state.grains.frozen[i] {
-            state.grains.v[i] = D2::from_array([0.0; 3]);
-            state.grains.omega[i] = 0.0;
+    let mut state = sample.clone();
+    state.grains = Default::default();
+    for g in &new {
+        let i = state.grains.push(g.id, D2::from_array(g.x), g.radius, g.mass, material);
+        if g.x[1] < glue {
+            state.grains.frozen[i] = true;
+        } else {
+            state.grains.v[i] = D2::from_array(g.v);
         }
     }
+    let pipe = grains_dem::DemPipeline::<D2>::new(2)?;
     // The continuum's stress in the same cells (compression positive, volume-weighted).
     let in_region = |x: [f64; 3]| epoch::cell_of(&at.cells, 2, x).is_some_and(|c| plan.zones[c] != Zone::Continuum);
     let continuum = {

@@ -85,6 +85,8 @@ pub(super) struct BiaxialRun {
     fwhm: f64,
     angle: f64,
     counted: usize,
+    /// The band's volumetric strain against the axial strain ([`band_volume`]).
+    band_volume: Vec<[f64; 2]>,
     /// The grains' positions at the window's start and the band's (indices into them).
     x0: Vec<[f64; 2]>,
     band: Vec<usize>,
@@ -162,6 +164,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confin
             .collect()
     };
     let start = free(&state);
+    let mut snapshots = vec![(0.0, disks(&state))];
     let mut records = Vec::new();
     let (mut from, mut to) = (None, None);
     let (mut traction, mut pulls) = (Vec::new(), Vec::new());
@@ -193,6 +196,9 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confin
             volumetric: 1.0 - area / a0,
             sin_phi: (sigma1 - PRESSURE) / (sigma1 + PRESSURE),
         });
+        if axial >= snapshots.len() as f64 * SNAPSHOT {
+            snapshots.push((axial, disks(&state)));
+        }
         if from.is_none() && axial >= WINDOW.0 {
             from = Some(free(&state));
         }
@@ -220,6 +226,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confin
     let found = inner_band(&x0, &strain, &start, EDGE_CELLS * CELLS_D[0] * d, d, d, w0.hypot(h0))?;
     let (peak, psi_peak) = peak_angles(&records);
     let (phi, psi) = window_angles(&records);
+    let band_volume = band_volume(&found.bbox, &snapshots[0].1, &snapshots);
     Ok(BiaxialRun {
         seed,
         grains: sample,
@@ -231,6 +238,7 @@ fn run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, confin
         fwhm: found.fwhm,
         angle: found.angle,
         counted: found.members.len(),
+        band_volume,
         x0,
         band: found.members,
         peak,
@@ -266,7 +274,9 @@ fn inner_band(x0: &[[f64; 2]], strain: &[f64], start: &[[f64; 2]], edge: f64, si
     let found =
         band::measure(&x, &e, band::percentile(&e, 0.98), size).context("no band: fewer than three members above the 98th percentile")?;
     let (angle, fwhm) = band_line(&x, &e, &found.grains, d, reach);
+    let members: Vec<[f64; 2]> = found.grains.iter().map(|&i| x[i]).collect();
     Ok(InnerBand {
+        bbox: BandBox::around(&members, found.angle, size),
         members: found.grains.iter().map(|&i| inner[i]).collect(),
         t_s: found.thickness / d,
         length: found.length / d,
@@ -277,13 +287,102 @@ fn inner_band(x0: &[[f64; 2]], strain: &[f64], start: &[[f64; 2]], edge: f64, si
 
 /// What [`inner_band`] measures.
 struct InnerBand {
-    /// App. A's band (indices into the positions), its box's thickness and length [D50].
+    /// App. A's band (indices into the positions), its box's thickness and length [D50], the
+    /// box.
     members: Vec<usize>,
+    bbox: BandBox,
     t_s: f64,
     length: f64,
     /// [`band_line`]'s inclination [°] and profile width [D50].
     angle: f64,
     fwhm: f64,
+}
+
+/// App. A's box around a band: its centre, the unit direction of its length, and its half
+/// length and half thickness [m].
+#[derive(Clone, Copy, Debug)]
+struct BandBox {
+    centre: [f64; 2],
+    dir: [f64; 2],
+    half: [f64; 2],
+}
+
+impl BandBox {
+    /// The box of the centres `x` with its length along `angle` (radians from +x), grown by
+    /// `size` (App. A's box of the grains, not of their centres: `band::measure`'s).
+    fn around(x: &[[f64; 2]], angle: f64, size: f64) -> Self {
+        let dir = [angle.cos(), angle.sin()];
+        let normal = [-dir[1], dir[0]];
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in x {
+            let uv = [p[0] * dir[0] + p[1] * dir[1], p[0] * normal[0] + p[1] * normal[1]];
+            for k in 0..2 {
+                (lo[k], hi[k]) = (lo[k].min(uv[k]), hi[k].max(uv[k]));
+            }
+        }
+        let mid = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+        BandBox {
+            centre: [mid[0] * dir[0] + mid[1] * normal[0], mid[0] * dir[1] + mid[1] * normal[1]],
+            dir,
+            half: [0.5 * (hi[0] - lo[0] + size), 0.5 * (hi[1] - lo[1] + size)],
+        }
+    }
+
+    /// The area of the `disks` (centre, radius) inside the box over the box's area, each disk
+    /// clipped by the four sides (one that crosses a corner loses the corner's overlap twice:
+    /// a few of the several hundred grains of a band's box).
+    fn packing(&self, disks: impl IntoIterator<Item = ([f64; 2], f64)>) -> f64 {
+        let normal = [-self.dir[1], self.dir[0]];
+        let inside: f64 = disks
+            .into_iter()
+            .map(|(x, r)| {
+                let rel = [x[0] - self.centre[0], x[1] - self.centre[1]];
+                let (u, v) = (rel[0] * self.dir[0] + rel[1] * self.dir[1], rel[0] * normal[0] + rel[1] * normal[1]);
+                let [a, b] = self.half;
+                (std::f64::consts::PI * r * r - cap(r, a - u) - cap(r, a + u) - cap(r, b - v) - cap(r, b + v)).max(0.0)
+            })
+            .sum();
+        inside / (4.0 * self.half[0] * self.half[1])
+    }
+}
+
+/// The area of a disk of radius `r` beyond a line at signed distance `h` from its centre.
+fn cap(r: f64, h: f64) -> f64 {
+    if h >= r {
+        0.0
+    } else if h <= -r {
+        std::f64::consts::PI * r * r
+    } else {
+        r * r * (h / r).acos() - h * (r * r - h * h).sqrt()
+    }
+}
+
+/// The volumetric strain of the band's box (compression positive, as [`Record::volumetric`])
+/// at each snapshot (axial strain, the grains as disks): 1 − Φ0 / Φ, Φ the grains' area in the
+/// box over its area and Φ0 that of `start`'s grains (the specimen at the start of the
+/// shortening). The box is App. A's at the window, fixed in space: the material flows
+/// through it as the top comes down.
+fn band_volume(bbox: &BandBox, start: &[([f64; 2], f64)], snapshots: &[(f64, Disks)]) -> Vec<[f64; 2]> {
+    let phi0 = bbox.packing(start.iter().copied());
+    snapshots
+        .iter()
+        .map(|(axial, disks)| [*axial, 1.0 - phi0 / bbox.packing(disks.iter().copied())])
+        .collect()
+}
+
+/// Axial strain between the snapshots of the grains that [`band_volume`] reads.
+const SNAPSHOT: f64 = 0.0025;
+
+/// Grains as disks: centre and radius.
+type Disks = Vec<([f64; 2], f64)>;
+
+/// The disks of `state`'s specimen (not the membrane's nodes).
+fn disks(state: &DemState<D2>) -> Disks {
+    let g = &state.grains;
+    (0..g.len())
+        .filter(|&i| g.id[i] < MEMBRANE)
+        .map(|i| ([g.x[i].x, g.x[i].y], g.radius[i]))
+        .collect()
 }
 
 /// The band's centre line, the principal axis of the band's members `band` among the
@@ -632,6 +731,55 @@ mod tests {
     /// biaxial had) puts the top rows 4% over (printed). Fails with the loads through the
     /// points' weights (`PointLoads::Weights`: the top cell carries 3/4, 21.7% off), or with
     /// the platen's force lost or of the wrong sign.
+    /// App. A's box as the band-volume measure reads it (Chen Fig. 17, right): the box of a
+    /// rectangle's corners, turned, is that rectangle (grown by the size); a square lattice
+    /// of disks (r = 0.5, spacing 1.1 mm) reads π r² / s² = 0.6491 in a turned box of
+    /// 41 × 13 mm at two places on it (the disks clipped by its sides; within 0.5%, measured
+    /// 0.02% and 0.08%); a disk whose centre lies on a side counts half; the lattice spread
+    /// by 1% along both axes reads a volumetric strain of 1 − 1.01² = −2.01% (within 0.1%,
+    /// measured −2.08%: the box's edges cut the two lattices differently).
+    #[test]
+    fn a_band_box_reads_the_packing_of_its_grains() {
+        use std::f64::consts::PI;
+        let (angle, size) = (0.6f64, 1e-3);
+        let (c, sn) = (angle.cos(), angle.sin());
+        let turn = |p: [f64; 2]| [p[0] * c - p[1] * sn + 0.003, p[0] * sn + p[1] * c - 0.002];
+        let corners = [[0.0, 0.0], [0.04, 0.0], [0.04, 0.012], [0.0, 0.012]].map(turn);
+        let b = BandBox::around(&corners, angle, size);
+        let centre = turn([0.02, 0.006]);
+        assert!(
+            (b.centre[0] - centre[0]).abs() < 1e-12 && (b.centre[1] - centre[1]).abs() < 1e-12,
+            "{:?}",
+            b.centre
+        );
+        assert!(
+            (b.half[0] - 0.0205).abs() < 1e-12 && (b.half[1] - 0.0065).abs() < 1e-12,
+            "{:?}",
+            b.half
+        );
+        let (r, s) = (0.5e-3, 1.1e-3);
+        let lattice = |stretch: f64| -> Vec<([f64; 2], f64)> {
+            (-60..60)
+                .flat_map(|i| (-60..60).map(move |j| ([i as f64 * s * stretch, j as f64 * s * stretch], r)))
+                .collect()
+        };
+        let want = PI * r * r / (s * s);
+        for centre in [[0.0, 0.0], [0.0123, -0.0071]] {
+            let b = BandBox { centre, ..b };
+            let got = b.packing(lattice(1.0));
+            assert!((got / want - 1.0).abs() < 0.005, "packing {got} against {want}");
+        }
+        let flat = BandBox {
+            centre: [0.0; 2],
+            dir: [1.0, 0.0],
+            half: [0.01, 0.005],
+        };
+        let half = flat.packing([([0.002, 0.005], r)]) * 4.0 * 0.01 * 0.005;
+        assert!((half / (0.5 * PI * r * r) - 1.0).abs() < 1e-12, "{half}");
+        let strain = band_volume(&b, &lattice(1.0), &[(0.01, lattice(1.01))]);
+        assert!((strain[0][1] - (1.0 - 1.01f64.powi(2))).abs() < 1e-3, "{strain:?}");
+    }
+
     #[test]
     fn the_platen_on_the_points_loads_the_top_row_as_the_rest() {
         for on_points in [false, true] {
