@@ -246,11 +246,10 @@ pub(super) fn continuum_run(
     cell_d: f64,
     hybrid: Option<grains_dem::coupled::GrainTransfer>,
 ) -> anyhow::Result<ContinuumShear> {
-    use grains_grid::{D2, Grid, Kernel};
-    use grains_mpm::boundary::Contact;
-    use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
+    use grains_grid::{D2, Grid};
+    use grains_mpm::pipeline::{Model, MpmPipeline};
     use grains_mpm::points::Points;
-    use grains_oracle::shear_band::{self as oracle, Coefficients, Persistence, RecentStrain};
+    use grains_oracle::shear_band::{Coefficients, Persistence, RecentStrain};
     let t0 = std::time::Instant::now();
     let d = dem.diameter;
     let (w, height) = (dem.width, dem.height);
@@ -268,19 +267,7 @@ pub(super) fn continuum_run(
     };
     let rho = grain_density * dem.packing;
     let shear_modulus = model.shear;
-    let model = Model::CriticalState(*model);
-    let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, h, 2);
-    let params = MpmParams::<D2> {
-        grid,
-        kernel: Kernel::Gimp { half_width: 0.5 * spacing },
-        model,
-        gravity: D2::from_array([0.0; 3]),
-        transfer: Transfer::Apic,
-        domain_walls: Some(Contact::Sticky),
-        walls: Vec::new(),
-        point_loads: grains_mpm::pipeline::PointLoads::Weights,
-        ambient_pressure: 0.0,
-    };
+    let (params, dt) = mpm_params(grid, spacing, model, rho, (grains_mpm::pipeline::PointLoads::Weights, 0.0));
     let mut pts = Points::<D2>::default();
     let rows = (height / spacing).round() as usize;
     let cols = (w / spacing).round() as usize;
@@ -404,16 +391,7 @@ pub(super) fn continuum_run(
         }
         // The oracle (Alg. 1) on the cells.
         let t = step as f64 * dt;
-        let max_rate = pts.plastic_rate.iter().copied().fold(0.0, f64::max);
-        let tau_l = oracle::window(coefficients.cl, max_rate);
-        let tau_g = oracle::window(coefficients.cg, max_rate);
-        let recent_strain = recent.recent(t, tau_l, &pts.id, &pts.plastic_strain);
-        recent.record(t, &pts.id, &pts.plastic_strain);
-        let at = |k: usize| D2::to_array(pts.x[k]);
-        let rate = oracle::cell_average(&cells, 2, (0..pts.len()).map(|k| (at(k), pts.mass[k], pts.plastic_rate[k])));
-        let recent_cells = oracle::cell_average(&cells, 2, (0..pts.len()).map(|k| (at(k), pts.mass[k], recent_strain[k])));
-        let flagged = oracle::flag(&cells, 2, &rate, &recent_cells, d, &coefficients);
-        if persistence.update(t, flagged, tau_g) && detected.is_none() {
+        if oracle_fires(&cells, &pts, d, &coefficients, (&mut recent, &mut persistence), t) && detected.is_none() {
             let ys: Vec<f64> = persistence
                 .flagged()
                 .iter()
@@ -440,7 +418,7 @@ pub(super) fn continuum_run(
                 points: (0..pts.len())
                     .map(|k| grains_oracle::epoch::Point {
                         id: pts.id[k],
-                        x: at(k),
+                        x: D2::to_array(pts.x[k]),
                         mass: pts.mass[k],
                         share: 1.0,
                         v: D2::to_array(pts.v[k]),
@@ -520,6 +498,61 @@ pub(super) fn consolidated(pts: &mut grains_mpm::points::Points<grains_grid::D2>
         pts.b_e[k] = identity * (-pressure / bulk).exp();
         pts.tau[k] = identity * -pressure;
     }
+}
+
+/// One look of the shear-band oracle (Chen 2021 Alg. 1) at the points `pts` at time `t`: the
+/// windows τ_l and τ_g from the fastest plastic rate, the plastic strain grown over τ_l
+/// (`recent` keeps the record), both averaged on the `cells`, the cells flagged for grains of
+/// diameter `d`; true once the flagged set has held for τ_g (`persistence` then holds it).
+pub(super) fn oracle_fires(
+    cells: &grains_grid::Grid,
+    pts: &grains_mpm::points::Points<D2>,
+    d: f64,
+    coefficients: &grains_oracle::shear_band::Coefficients,
+    (recent, persistence): (
+        &mut grains_oracle::shear_band::RecentStrain,
+        &mut grains_oracle::shear_band::Persistence,
+    ),
+    t: f64,
+) -> bool {
+    use grains_oracle::shear_band as oracle;
+    let max_rate = pts.plastic_rate.iter().copied().fold(0.0, f64::max);
+    let (tau_l, tau_g) = (oracle::window(coefficients.cl, max_rate), oracle::window(coefficients.cg, max_rate));
+    let recent_strain = recent.recent(t, tau_l, &pts.id, &pts.plastic_strain);
+    recent.record(t, &pts.id, &pts.plastic_strain);
+    let at = |k: usize| D2::to_array(pts.x[k]);
+    let rate = oracle::cell_average(cells, 2, (0..pts.len()).map(|k| (at(k), pts.mass[k], pts.plastic_rate[k])));
+    let recent_cells = oracle::cell_average(cells, 2, (0..pts.len()).map(|k| (at(k), pts.mass[k], recent_strain[k])));
+    let flagged = oracle::flag(cells, 2, &rate, &recent_cells, d, coefficients);
+    persistence.update(t, flagged, tau_g)
+}
+
+/// The shears' continuum on `grid`: Chen's critical-state `model`, two points per cell and
+/// axis (`spacing`), GIMP, APIC, no gravity, the domain's faces sticky, no walls; point
+/// loads and the ambient (confining) pressure as given. With its step: half the largest CFL
+/// number for material of density `rho`.
+pub(super) fn mpm_params(
+    grid: grains_grid::Grid,
+    spacing: f64,
+    model: &grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState,
+    rho: f64,
+    (point_loads, ambient_pressure): (grains_mpm::pipeline::PointLoads, f64),
+) -> (grains_mpm::pipeline::MpmParams<D2>, f64) {
+    use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, Transfer, cfl_time_step};
+    let model = Model::CriticalState(*model);
+    let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, grid.h, 2);
+    let params = MpmParams::<D2> {
+        grid,
+        kernel: grains_grid::Kernel::Gimp { half_width: 0.5 * spacing },
+        model,
+        gravity: D2::from_array([0.0; 3]),
+        transfer: Transfer::Apic,
+        domain_walls: Some(grains_mpm::boundary::Contact::Sticky),
+        walls: Vec::new(),
+        point_loads,
+        ambient_pressure,
+    };
+    (params, dt)
 }
 
 /// Chen's critical-state continuum of `material` at `pressure` [Pa] (§2.2: from DEM element

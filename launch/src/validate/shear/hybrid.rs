@@ -295,14 +295,8 @@ pub(super) fn hybrid_report(
         let run = match run.and_then(|r| r.hybrid.is_some().then_some(r).context("the oracle never fired: nothing enriched")) {
             Ok(r) => r,
             Err(e) => {
-                let _ = writeln!(md, "| hybrid, `{name}` | did not finish: {e:#} | | | | | | | | | | | |");
-                part.check(
-                    format!("planar shear (hybrid, {name}) ran to its end"),
-                    "every run completes",
-                    format!("{e:#}"),
-                    "no error",
-                    false,
-                );
+                let what = format!("planar shear (hybrid, {name})");
+                super::unfinished_row(part, md, (&format!("hybrid, `{name}`"), 11), &what, &e);
                 continue;
             }
         };

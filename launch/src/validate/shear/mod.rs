@@ -88,6 +88,20 @@ fn unfinished(part: &mut Part, md: &mut String, title: &str, what: &str, e: &any
     );
 }
 
+/// A run of a table that did not finish: its row (`row`, then the error and `columns` empty
+/// cells) and a failed check that `what` ran to its end.
+fn unfinished_row(part: &mut Part, md: &mut String, (row, columns): (&str, usize), what: &str, e: &anyhow::Error) {
+    tracing::error!("validate: {what} failed: {e:#}");
+    let _ = writeln!(md, "| {row} | did not finish: {e:#} |{}", " |".repeat(columns));
+    part.check(
+        format!("{what} ran to its end"),
+        "every run completes",
+        format!("{e:#}"),
+        "no error",
+        false,
+    );
+}
+
 /// What the DEM planar shear hands the continuum's: the specimen, its packing, the band.
 #[derive(Clone)]
 struct DemShear {

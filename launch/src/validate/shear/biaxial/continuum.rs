@@ -199,26 +199,25 @@ fn band_volume_report(
         100.0 * SNAPSHOT,
         100.0 * WINDOW.0
     );
-    let end = |records: &[Record]| records.last().map_or(f64::NAN, |x| 100.0 * x.volumetric);
-    for r in dems {
+    // The DEM's rows (no continuum cells) and the hybrids'.
+    let rows = dems
+        .iter()
+        .map(|r| (format!("DEM, seed {}", r.seed), &r.band_volume, &r.records, String::new()))
+        .chain(hybrids.iter().map(|h| {
+            (
+                h.name.clone(),
+                &h.band_volume,
+                &h.records,
+                format!("{:.0}%", 100.0 * h.box_in_continuum),
+            )
+        }));
+    for (name, curve, records, in_continuum) in rows {
         let _ = writeln!(
             md,
-            "| DEM, seed {} | {:.2}% | {:.2}% | {:.2}% | |",
-            r.seed,
-            at(&r.band_volume, WINDOW.0),
-            at(&r.band_volume, f64::INFINITY),
-            end(&r.records)
-        );
-    }
-    for h in hybrids {
-        let _ = writeln!(
-            md,
-            "| {} | {:.2}% | {:.2}% | {:.2}% | {:.0}% |",
-            h.name,
-            at(&h.band_volume, WINDOW.0),
-            at(&h.band_volume, f64::INFINITY),
-            end(&h.records),
-            100.0 * h.box_in_continuum
+            "| {name} | {:.2}% | {:.2}% | {:.2}% | {in_continuum} |",
+            at(curve, WINDOW.0),
+            at(curve, f64::INFINITY),
+            records.last().map_or(f64::NAN, |x| 100.0 * x.volumetric)
         );
     }
     let _ = writeln!(md);
@@ -299,14 +298,8 @@ fn hybrid_report(
         let run = match continuum_run(dem, model, density, d, cells, Some((transfer, phi0))) {
             Ok(r) => r,
             Err(e) => {
-                let _ = writeln!(md, "| `{name}` | did not finish: {e:#} |||||||||||||||");
-                part.check(
-                    format!("biaxial (hybrid, {name}) ran to its end"),
-                    "every run completes",
-                    format!("{e:#}"),
-                    "no error",
-                    false,
-                );
+                let what = format!("biaxial (hybrid, {name})");
+                super::super::unfinished_row(part, md, (&format!("`{name}`"), 14), &what, &e);
                 continue;
             }
         };
@@ -480,11 +473,10 @@ fn continuum_run(
     hybrid: Option<(grains_dem::coupled::GrainTransfer, f64)>,
 ) -> anyhow::Result<ContinuumBiaxial> {
     use super::super::continuum::ORACLE_EVERY;
-    use grains_grid::{Grid, Kernel};
-    use grains_mpm::boundary::Contact;
-    use grains_mpm::pipeline::{MAX_CFL, Model, MpmParams, MpmPipeline, Transfer, cfl_time_step};
+    use grains_grid::Grid;
+    use grains_mpm::pipeline::{Model, MpmPipeline};
     use grains_mpm::points::Points;
-    use grains_oracle::shear_band::{self as oracle, Coefficients, Persistence, RecentStrain};
+    use grains_oracle::shear_band::{Coefficients, Persistence, RecentStrain};
     let t0 = std::time::Instant::now();
     let (w, height) = (dem.width, dem.height);
     let nx = (w / (cell_d * d)).round().max(4.0) as u64;
@@ -502,19 +494,7 @@ fn continuum_run(
     let rho = grain_density * dem.packing;
     let shear_modulus = model.shear;
     let platen_stiffness = model.wave_speed_modulus(2);
-    let model = Model::CriticalState(*model);
-    let dt = 0.5 * MAX_CFL * cfl_time_step(&model, rho, h, 2);
-    let params = MpmParams::<D2> {
-        grid,
-        kernel: Kernel::Gimp { half_width: 0.5 * spacing },
-        model,
-        gravity: D2::from_array([0.0; 3]),
-        transfer: Transfer::Apic,
-        domain_walls: Some(Contact::Sticky),
-        walls: Vec::new(),
-        point_loads: grains_mpm::pipeline::PointLoads::Face,
-        ambient_pressure: PRESSURE,
-    };
+    let (params, dt) = super::super::continuum::mpm_params(grid, spacing, model, rho, (grains_mpm::pipeline::PointLoads::Face, PRESSURE));
     let packing_cs = match params.model {
         Model::CriticalState(m) => m.packing_cs,
         _ => unreachable!("built above"),
@@ -639,82 +619,71 @@ fn continuum_run(
             continue;
         }
         let t = step as f64 * dt;
-        if detected.is_none() {
-            let max_rate = pts.plastic_rate.iter().copied().fold(0.0, f64::max);
-            let (tau_l, tau_g) = (oracle::window(coefficients.cl, max_rate), oracle::window(coefficients.cg, max_rate));
-            let recent_strain = recent.recent(t, tau_l, &pts.id, &pts.plastic_strain);
-            recent.record(t, &pts.id, &pts.plastic_strain);
-            let at = |k: usize| D2::to_array(pts.x[k]);
-            let rate = oracle::cell_average(&cells, 2, (0..n).map(|k| (at(k), pts.mass[k], pts.plastic_rate[k])));
-            let recent_cells = oracle::cell_average(&cells, 2, (0..n).map(|k| (at(k), pts.mass[k], recent_strain[k])));
-            let flagged = oracle::flag(&cells, 2, &rate, &recent_cells, d, &coefficients);
-            if persistence.update(t, flagged, tau_g) {
-                let at: Vec<[f64; 2]> = persistence
-                    .flagged()
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, f)| **f)
-                    .map(|(i, _)| {
-                        let nx = cells.nodes[0] as usize;
-                        [0, 1].map(|k| cells.origin[k] + ([i % nx, i / nx][k] as f64 + 0.5) * h)
-                    })
+        if detected.is_none() && super::super::continuum::oracle_fires(&cells, &pts, d, &coefficients, (&mut recent, &mut persistence), t) {
+            let at: Vec<[f64; 2]> = persistence
+                .flagged()
+                .iter()
+                .enumerate()
+                .filter(|(_, f)| **f)
+                .map(|(i, _)| {
+                    let nx = cells.nodes[0] as usize;
+                    [0, 1].map(|k| cells.origin[k] + ([i % nx, i / nx][k] as f64 + 0.5) * h)
+                })
+                .collect();
+            let mean = [0, 1].map(|k| at.iter().map(|p| p[k]).sum::<f64>() / at.len() as f64 / d);
+            detected = Some((axial, at.len(), mean));
+            if let Some((transfer, phi0_d)) = hybrid {
+                let detection = super::super::continuum::Detection {
+                    strain: axial,
+                    shear_stress: 0.0,
+                    nodes: params.grid,
+                    kernel: params.kernel,
+                    cells,
+                    flagged: persistence.flagged().to_vec(),
+                    points: (0..pts.len())
+                        .map(|k| grains_oracle::epoch::Point {
+                            id: pts.id[k],
+                            x: D2::to_array(pts.x[k]),
+                            mass: pts.mass[k],
+                            share: 1.0,
+                            v: D2::to_array(pts.v[k]),
+                        })
+                        .collect(),
+                };
+                let stress: Vec<([f64; 2], f64)> = (0..pts.len())
+                    .map(|k| ([pts.tau[k].x_axis.x, pts.tau[k].y_axis.y], pts.jacobian[k] * pts.volume[k]))
                     .collect();
-                let mean = [0, 1].map(|k| at.iter().map(|p| p[k]).sum::<f64>() / at.len() as f64 / d);
-                detected = Some((axial, at.len(), mean));
-                if let Some((transfer, phi0_d)) = hybrid {
-                    let detection = super::super::continuum::Detection {
-                        strain: axial,
-                        shear_stress: 0.0,
-                        nodes: params.grid,
-                        kernel: params.kernel,
-                        cells,
-                        flagged: persistence.flagged().to_vec(),
-                        points: (0..pts.len())
-                            .map(|k| grains_oracle::epoch::Point {
-                                id: pts.id[k],
-                                x: D2::to_array(pts.x[k]),
-                                mass: pts.mass[k],
-                                share: 1.0,
-                                v: D2::to_array(pts.v[k]),
-                            })
-                            .collect(),
-                    };
-                    let stress: Vec<([f64; 2], f64)> = (0..pts.len())
-                        .map(|k| ([pts.tau[k].x_axis.x, pts.tau[k].y_axis.y], pts.jacobian[k] * pts.volume[k]))
-                        .collect();
-                    let duration = (step + 1 - settle) as f64 * dt;
-                    let (parts, grains) = super::hybrid::enrich_and_train(
-                        &dem.sample,
-                        &detection,
-                        origin.as_ref().context("the points' places at the start of the shortening")?,
-                        &stress,
-                        &history,
-                        (duration, &fluid),
-                        (dem.dt, GLUE_D * d, speed, travel, phi0_d * d),
-                    )?;
-                    history.records = Vec::new();
-                    let mut c =
-                        super::super::hybrid::Coupled::new(parts, &mut pts, &params, (cells, transfer, Some(fluid)), dt, dem.dt, None);
-                    // The grains' platen where the points' is.
-                    if let grains_dem::state::WallShape::Plane { point, .. } = &mut c.dem_mut().walls[1].shape {
-                        *point = D2::from_array([0.0, height - travel, 0.0]);
-                    }
-                    tracing::info!(
-                        "validate biaxial: hybrid on {cell_d}-D50 cells: {} grains cut, {} points deleted, trained in {:.0} s",
-                        grains.grains,
-                        grains.deleted,
-                        grains.wall
-                    );
-                    band_grains = Some(grains);
-                    coupled = Some(c);
+                let duration = (step + 1 - settle) as f64 * dt;
+                let (parts, grains) = super::hybrid::enrich_and_train(
+                    &dem.sample,
+                    &detection,
+                    origin.as_ref().context("the points' places at the start of the shortening")?,
+                    &stress,
+                    &history,
+                    (duration, &fluid),
+                    (dem.dt, GLUE_D * d, speed, travel, phi0_d * d),
+                )?;
+                history.records = Vec::new();
+                let mut c = super::super::hybrid::Coupled::new(parts, &mut pts, &params, (cells, transfer, Some(fluid)), dt, dem.dt, None);
+                // The grains' platen where the points' is.
+                if let grains_dem::state::WallShape::Plane { point, .. } = &mut c.dem_mut().walls[1].shape {
+                    *point = D2::from_array([0.0, height - travel, 0.0]);
                 }
                 tracing::info!(
-                    "validate biaxial: continuum on {cell_d}-D50 cells: the oracle fires at axial strain {axial:.4}, {} cells, mean at ({:.1}, {:.1}) D50",
-                    at.len(),
-                    mean[0],
-                    mean[1]
+                    "validate biaxial: hybrid on {cell_d}-D50 cells: {} grains cut, {} points deleted, trained in {:.0} s",
+                    grains.grains,
+                    grains.deleted,
+                    grains.wall
                 );
+                band_grains = Some(grains);
+                coupled = Some(c);
             }
+            tracing::info!(
+                "validate biaxial: continuum on {cell_d}-D50 cells: the oracle fires at axial strain {axial:.4}, {} cells, mean at ({:.1}, {:.1}) D50",
+                at.len(),
+                mean[0],
+                mean[1]
+            );
         }
         if (step - settle).is_multiple_of(5 * ORACLE_EVERY) {
             if hybrid.is_some() {
