@@ -18,8 +18,6 @@ use std::collections::{HashMap, HashSet};
 /// The hybrid's continuum cells [D50]: the coarse grid of the continuum's two (App. D: both
 /// detect), the cheaper one.
 pub(super) const HYBRID_CELL_D: f64 = 4.0;
-/// The paper's transfer back (Yue 2018 Alg. 5–6 as written), which the large shear runs.
-pub(super) const PAPER_TRANSFER: GrainTransfer = GrainTransfer::Pic;
 
 /// A transfer named as `--shear-transfer` takes it: `pic`, `flip` (ours, its spin never
 /// locked: the shear is quasi-static throughout) or `points:B`, B in [0, 1].
