@@ -236,6 +236,19 @@ pub(super) fn continuum_planar_shear(args: &ValidateArgs, dems: &[DemShear], par
     Ok(())
 }
 
+/// The points as the enrichment takes them (a continuum's own: share 1).
+pub(super) fn oracle_points(pts: &grains_mpm::points::Points<D2>) -> Vec<grains_oracle::epoch::Point> {
+    (0..pts.len())
+        .map(|k| grains_oracle::epoch::Point {
+            id: pts.id[k],
+            x: D2::to_array(pts.x[k]),
+            mass: pts.mass[k],
+            share: 1.0,
+            v: D2::to_array(pts.v[k]),
+        })
+        .collect()
+}
+
 /// One continuum planar shear on cells of `cell_d` grain diameters; with `hybrid` (the
 /// grains' transfer back), the hybrid's: at the detection the band is enriched and trained,
 /// and the grains coupled from there on ([`Coupled`]).
@@ -415,15 +428,7 @@ pub(super) fn continuum_run(
                 kernel: params.kernel,
                 cells,
                 flagged: persistence.flagged().to_vec(),
-                points: (0..pts.len())
-                    .map(|k| grains_oracle::epoch::Point {
-                        id: pts.id[k],
-                        x: D2::to_array(pts.x[k]),
-                        mass: pts.mass[k],
-                        share: 1.0,
-                        v: D2::to_array(pts.v[k]),
-                    })
-                    .collect(),
+                points: oracle_points(&pts),
             };
             if let Some(transfer) = hybrid {
                 let enriched = enrich_and_train(dem, &detection, &history, h)?;

@@ -79,13 +79,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
 fn unfinished(part: &mut Part, md: &mut String, title: &str, what: &str, e: &anyhow::Error) {
     tracing::error!("validate: {what} failed: {e:#}");
     let _ = writeln!(md, "### {title}\n\nDid not finish: {e:#}\n");
-    part.check(
-        format!("{what} ran to its end"),
-        "every run completes",
-        format!("{e:#}"),
-        "no error",
-        false,
-    );
+    did_not_finish(part, what, e);
 }
 
 /// A run of a table that did not finish: its row (`row`, then the error and `columns` empty
@@ -93,6 +87,11 @@ fn unfinished(part: &mut Part, md: &mut String, title: &str, what: &str, e: &any
 fn unfinished_row(part: &mut Part, md: &mut String, (row, columns): (&str, usize), what: &str, e: &anyhow::Error) {
     tracing::error!("validate: {what} failed: {e:#}");
     let _ = writeln!(md, "| {row} | did not finish: {e:#} |{}", " |".repeat(columns));
+    did_not_finish(part, what, e);
+}
+
+/// The failed check of a run that stopped with `e`.
+fn did_not_finish(part: &mut Part, what: &str, e: &anyhow::Error) {
     part.check(
         format!("{what} ran to its end"),
         "every run completes",

@@ -640,15 +640,7 @@ fn continuum_run(
                     kernel: params.kernel,
                     cells,
                     flagged: persistence.flagged().to_vec(),
-                    points: (0..pts.len())
-                        .map(|k| grains_oracle::epoch::Point {
-                            id: pts.id[k],
-                            x: D2::to_array(pts.x[k]),
-                            mass: pts.mass[k],
-                            share: 1.0,
-                            v: D2::to_array(pts.v[k]),
-                        })
-                        .collect(),
+                    points: super::super::continuum::oracle_points(&pts),
                 };
                 let stress: Vec<([f64; 2], f64)> = (0..pts.len())
                     .map(|k| ([pts.tau[k].x_axis.x, pts.tau[k].y_axis.y], pts.jacobian[k] * pts.volume[k]))
