@@ -114,6 +114,14 @@ pub struct ValidateArgs {
     /// the saved position; spin from the contacts).
     #[arg(long = "shear-transfer", value_delimiter = ',', default_value = "pic,flip")]
     pub shear_transfers: Vec<String>,
+    /// The large planar shear's height in §6.1's heights (`--part shear`, not in `--quick`:
+    /// Chen 2021 §6.4 at this machine's size).
+    #[arg(long = "shear-large-times", default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub shear_large_times: u64,
+    /// The large planar shear's continuum cells in D50 (Chen's large shear: 0.75-cm cells in
+    /// 1-mm grains; the cell is the period over a whole number of cells, so 8 gives 7.5).
+    #[arg(long = "shear-large-cells", default_value_t = 8.0, value_parser = positive_d50)]
+    pub shear_large_cells: f64,
     /// What holds the DEM biaxial sample's sides at the confining pressure (`--part
     /// biaxial`): `fluid` (the pressure on the packing's surface on a grid, as the MPM's
     /// confining fluid takes it: `grains_dem::fluid`; Chen 2021 App. B's membrane also acts
@@ -132,6 +140,16 @@ pub struct ValidateArgs {
     /// Parts to run (default all; `--quick`: those of the CI subset, each in its quick form).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub part: Vec<PartName>,
+}
+
+/// A length in D50 for a continuum cell: finite, at least 1 (a cell under a grain holds no
+/// grain's worth of material for the band measure).
+fn positive_d50(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 1.0 => Ok(v),
+        Ok(v) => Err(format!("{v} D50: a cell must be at least 1 D50")),
+        Err(e) => Err(format!("{s:?}: {e} (a number of D50, e.g. 8)")),
+    }
 }
 
 /// What holds a DEM sample's sides at a pressure.
@@ -156,5 +174,35 @@ impl ValidateArgs {
                 }
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(clap::Parser)]
+    struct Wrapper {
+        #[command(flatten)]
+        args: ValidateArgs,
+    }
+
+    #[test]
+    fn the_large_shear_takes_its_height_and_cells_and_refuses_what_cannot_run() {
+        let parsed = |extra: &[&str]| Wrapper::try_parse_from(std::iter::once("validate").chain(extra.iter().copied()));
+        let default = parsed(&[]).unwrap().args;
+        assert_eq!((default.shear_large_times, default.shear_large_cells), (20, 8.0));
+        let set = parsed(&["--shear-large-times", "5", "--shear-large-cells", "4"]).unwrap().args;
+        assert_eq!((set.shear_large_times, set.shear_large_cells), (5, 4.0));
+        for bad in [
+            ["--shear-large-times", "0"],
+            ["--shear-large-cells", "0.5"],
+            ["--shear-large-cells", "nan"],
+            ["--shear-large-cells", "eight"],
+        ] {
+            let e = parsed(&bad).err().unwrap_or_else(|| panic!("{bad:?} was taken"));
+            assert_eq!(e.kind(), clap::error::ErrorKind::ValueValidation, "{bad:?}: {e}");
+        }
     }
 }

@@ -1,4 +1,4 @@
-//! Chen 2021 §6.4 at this machine's size: a planar shear [`TIMES`] times as tall as §6.1's,
+//! Chen 2021 §6.4 at this machine's size: a planar shear `--shear-large-times` times as tall as §6.1's,
 //! run as the hybrid on coarse cells, and its cost against the DEM's. As Chen's Table 11,
 //! the DEM at that size is not run to its end: its cost is its measured cost per step on the
 //! tall specimen times the steps of the shear. The speed-up model of §6.4.1 is fitted to the
@@ -9,10 +9,6 @@ use super::hybrid::transfer_named;
 use super::*;
 use grains_dem::DemState;
 
-/// The large specimen's height in §6.1's heights, and its continuum's cells [D50]: Chen's
-/// large planar shear has 0.75-cm cells in 1-mm grains (Table 11), 58 grains a cell (§6.4.1).
-const TIMES: usize = 20;
-const CELL_D: f64 = 8.0;
 /// DEM steps timed on the tall specimen a round (after as many to build the neighbour lists),
 /// and the rounds.
 const PROBE_STEPS: usize = 300;
@@ -97,17 +93,21 @@ pub(super) fn large_planar_shear(
     part: &mut Part,
     md: &mut String,
 ) -> anyhow::Result<()> {
+    // The specimen's height in §6.1's heights and its continuum's cells [D50]
+    // (`--shear-large-times`, `--shear-large-cells`): Chen's large planar shear has 0.75-cm
+    // cells in 1-mm grains (Table 11), 58 grains a cell (§6.4.1).
+    let (times, cell_d) = (args.shear_large_times as usize, args.shear_large_cells);
     let d = dem.diameter;
-    let tall = stretched(dem, TIMES);
+    let tall = stretched(dem, times);
     // The DEM's cost at the tall size: §6.1's measured shear scaled by the cost per step of
     // the tall specimen over the small one's, probed in turns. (The probe alone reads a
     // packing at rest, whose cost per step is not the sheared run's: only its ratio is used.)
-    let [(small_grains, small_step), (tall_grains, tall_step)] = dem_step_costs(&dem.initial, dem.height, TIMES, dem.dt)?;
+    let [(small_grains, small_step), (tall_grains, tall_step)] = dem_step_costs(&dem.initial, dem.height, times, dem.dt)?;
     let dem_wall = dem.shear_wall * tall_step / small_step;
     // The continuum alone on the tall specimen (its cost per cell), then the hybrid with each
     // transfer of `--shear-transfer`: the paper's (`pic`) gives the paper's method's cost, and
     // the issue's target is the speed-up with the DEM's band.
-    let continuum = continuum_run(&tall, model, grain_density, CELL_D, None)?;
+    let continuum = continuum_run(&tall, model, grain_density, cell_d, None)?;
     let cell = continuum.cell / d;
     let cells = (tall.width / continuum.cell).round() * (tall.height / continuum.cell).ceil();
     let steps = dem.shear_steps as f64;
@@ -119,7 +119,7 @@ pub(super) fn large_planar_shear(
     let r = c_c / (c_d * n_d);
     let mut rows = Vec::new();
     for name in &args.shear_transfers {
-        let run = continuum_run(&tall, model, grain_density, CELL_D, Some(transfer_named(name)?));
+        let run = continuum_run(&tall, model, grain_density, cell_d, Some(transfer_named(name)?));
         match run.and_then(Large::of) {
             Ok(row) => rows.push((name.as_str(), row)),
             Err(e) => unfinished(
@@ -140,19 +140,19 @@ pub(super) fn large_planar_shear(
     let predicted = speedup(t_d_over_t, r);
     let _ = writeln!(
         md,
-        "### §6.4: a large planar shear, cost\n\n§6.1's specimen {TIMES} times as tall ({:.0} × {:.0} D50), as Chen's large \
+        "### §6.4: a large planar shear, cost\n\n§6.1's specimen {times} times as tall ({:.0} × {:.0} D50), as Chen's large \
          planar shear (Table 11: 10,000 D50 tall, 0.75-cm cells, 116× faster than its DEM). The hybrid on {cell:.1}-D50 cells, \
          once per transfer (`pic` is the paper's), enriched from §6.1's seed-1 sample at the continuum's band in the \
          middle, trained and coupled as in §6.1. As Chen's Table 11, the DEM at this size ({tall_grains} grains) is not run to \
          its end: its cost is §6.1's shear ({:.0} s for {small_grains} grains, {} steps) times the ratio of the costs of a \
-         step of {TIMES} copies of the consolidated sample stacked and of one copy, probed in turns ({PROBE_ROUNDS} rounds of \
-         {PROBE_STEPS} steps of the tall one and {TIMES} times as many of one copy, the fastest round of each, after \
+         step of {times} copies of the consolidated sample stacked and of one copy, probed in turns ({PROBE_ROUNDS} rounds of \
+         {PROBE_STEPS} steps of the tall one and {times} times as many of one copy, the fastest round of each, after \
          {PROBE_STEPS} steps to build the lists): {:.2} ms against {:.3} ms, {:.2}× for {:.2}× the grains. (The probe \
          alone reads a packing at rest: {:.3} ms a step on one copy against {:.3} ms over the sheared run.) The DEM's band \
          on the same sample at §6.1's size: {:.1} D50 at {:.1} D50 of {:.0}.\n\n\
          | | grains | points | wall | speed-up | t_s (App. A) | band centre | peak τ/σ_yy (strain) | mean τ/σ_yy over the window |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|\n\
-         | DEM, {TIMES} × §6.1 | {tall_grains} | | {dem_wall:.0} s (scaled) | 1 | | | | |\n\
+         | DEM, {times} × §6.1 | {tall_grains} | | {dem_wall:.0} s (scaled) | 1 | | | | |\n\
          | continuum, {cell:.1}-D50 cells | | {} | {:.0} s | | | | | |",
         tall.width / d,
         tall.height / d,
