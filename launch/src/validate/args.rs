@@ -114,6 +114,11 @@ pub struct ValidateArgs {
     /// the saved position; spin from the contacts).
     #[arg(long = "shear-transfer", value_delimiter = ',', default_value = "pic,flip")]
     pub shear_transfers: Vec<String>,
+    /// The DEM samples of `--part shear`'s planar shear (§6.1), by seed: each is a DEM run and
+    /// a hybrid run per transfer of `--shear-transfer`. The first is the one the continuum,
+    /// the kinematic training and the large planar shear take; `--quick` runs it alone.
+    #[arg(long = "shear-seeds", value_delimiter = ',', default_value = "1,2", value_parser = clap::value_parser!(u64).range(1..))]
+    pub shear_seeds: Vec<u64>,
     /// The large planar shear's height in §6.1's heights (`--part shear`, not in `--quick`:
     /// Chen 2021 §6.4 at this machine's size).
     #[arg(long = "shear-large-times", default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..))]
@@ -162,6 +167,20 @@ pub enum Confinement {
 }
 
 impl ValidateArgs {
+    /// `--shear-seeds` as the planar shear runs them: each seed once (the first alone with
+    /// `--quick`).
+    pub fn shear_seeds(&self) -> anyhow::Result<&[u64]> {
+        let seeds = &self.shear_seeds;
+        if let Some((k, s)) = seeds.iter().enumerate().find(|(k, s)| seeds[..*k].contains(s)) {
+            anyhow::bail!(crate::run::BadInput(format!(
+                "--shear-seeds: seed {s} is listed twice (at {} and {}); each seed is one DEM sample, list it once",
+                seeds.iter().position(|x| x == s).unwrap_or(0) + 1,
+                k + 1
+            )));
+        }
+        Ok(&seeds[..if self.quick { seeds.len().min(1) } else { seeds.len() }])
+    }
+
     /// The parts this invocation runs, in order: those named, else all (`--quick`: the quick ones).
     pub fn parts(&self) -> Vec<PartName> {
         PartName::ALL
@@ -186,6 +205,27 @@ mod tests {
     struct Wrapper {
         #[command(flatten)]
         args: ValidateArgs,
+    }
+
+    /// `--shear-seeds`: the DEM samples, the first alone in `--quick`; a seed below 1 or twice
+    /// is refused, saying which.
+    #[test]
+    fn the_planar_shear_takes_its_seeds_each_once() {
+        let parsed = |extra: &[&str]| Wrapper::try_parse_from(std::iter::once("validate").chain(extra.iter().copied()));
+        assert_eq!(parsed(&[]).unwrap().args.shear_seeds().unwrap(), &[1, 2]);
+        assert_eq!(parsed(&["--quick"]).unwrap().args.shear_seeds().unwrap(), &[1]);
+        assert_eq!(parsed(&["--shear-seeds", "3,1,5"]).unwrap().args.shear_seeds().unwrap(), &[3, 1, 5]);
+        assert_eq!(
+            parsed(&["--shear-seeds", "3,1", "--quick"]).unwrap().args.shear_seeds().unwrap(),
+            &[3]
+        );
+        for bad in [["--shear-seeds", "0"], ["--shear-seeds", "1,x"]] {
+            let e = parsed(&bad).err().unwrap_or_else(|| panic!("{bad:?} was taken"));
+            assert_eq!(e.kind(), clap::error::ErrorKind::ValueValidation, "{bad:?}: {e}");
+        }
+        let twice = parsed(&["--shear-seeds", "2,4,2"]).unwrap().args;
+        let e = twice.shear_seeds().unwrap_err().to_string();
+        assert!(e.contains("seed 2") && e.contains("1 and 3"), "{e}");
     }
 
     #[test]

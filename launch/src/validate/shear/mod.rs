@@ -59,7 +59,6 @@ const WINDOW: (f64, f64) = (0.37, 0.57);
 const BAND_TOLERANCE: f64 = 4.0;
 /// The DEM planar shear's samples, and the thickness of the layers of grains glued to the
 /// floor and to the plate [D50].
-const SEEDS: [u64; 2] = [1, 2];
 const GLUE_D: f64 = 3.0;
 
 pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
@@ -357,7 +356,7 @@ fn dem_run(scene: &grains_protocol::scene::Scene, material: usize, seed: u64, bo
     })
 }
 
-/// Chen 2021 §6.1 as a DEM, one run per seed of [`SEEDS`]: the band's thickness (their mean
+/// Chen 2021 §6.1 as a DEM, one run per seed of `--shear-seeds`: the band's thickness (their mean
 /// against the paper's), direction and softening. Returns each seed's run: the first is the
 /// one the continuum and the training take; the hybrid runs on every one.
 fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow::Result<Vec<DemShear>> {
@@ -367,7 +366,8 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
     let dem = scene.materials[material].dem.as_ref().context("a DEM material")?;
     let (mu, d) = (dem.friction, 2.0 * dem.radius);
     // `--quick`: the first seed only, no cohesive run.
-    let runs: Vec<DemRun> = SEEDS[..if args.quick { 1 } else { SEEDS.len() }]
+    let runs: Vec<DemRun> = args
+        .shear_seeds()?
         .iter()
         .map(|&seed| dem_run(&scene, material, seed, 0.0))
         .collect::<anyhow::Result<_>>()?;
