@@ -142,7 +142,7 @@ pub(super) fn large_planar_shear(
         md,
         "### §6.4: a large planar shear, cost\n\n§6.1's specimen {times} times as tall ({:.0} × {:.0} D50), as Chen's large \
          planar shear (Table 11: 10,000 D50 tall, 0.75-cm cells, 116× faster than its DEM). The hybrid on {cell:.1}-D50 cells, \
-         once per transfer (`pic` is the paper's), enriched from §6.1's seed-1 sample at the continuum's band in the \
+         once per transfer (`pic` is the paper's), enriched from §6.1's seed-{} sample at the continuum's band in the \
          middle, trained and coupled as in §6.1. As Chen's Table 11, the DEM at this size ({tall_grains} grains) is not run to \
          its end: its cost is §6.1's shear ({:.0} s for {small_grains} grains, {} steps) times the ratio of the costs of a \
          step of {times} copies of the consolidated sample stacked and of one copy, probed in turns ({PROBE_ROUNDS} rounds of \
@@ -156,6 +156,7 @@ pub(super) fn large_planar_shear(
          | continuum, {cell:.1}-D50 cells | | {} | {:.0} s | | | | | |",
         tall.width / d,
         tall.height / d,
+        dem.seed,
         dem.shear_wall,
         dem.shear_steps,
         1e3 * tall_step,

@@ -480,7 +480,7 @@ fn planar_shear(args: &ValidateArgs, part: &mut Part, md: &mut String) -> anyhow
         ));
     }
     series.push(Series::new(
-        "98th percentile, seed 1",
+        format!("98th percentile, seed {}", first.seed),
         Kind::Dashed,
         vec![(first.threshold, 0.0), (first.threshold, first.height / d)],
     ));
