@@ -26,6 +26,7 @@
 //! `--shear` runs the constant-pressure simple shear of [`shear`] instead: the friction's
 //! rate dependence μ(I) and the shear's transient from a consolidated sample (printed only).
 
+pub mod repose;
 pub mod shear;
 
 use anyhow::{Context, bail};
@@ -61,10 +62,11 @@ pub struct CalibrateArgs {
     /// Seed of the sample's radii and lattice jitter.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Which strength of the biaxial test `--write` records as the friction angle: the
-    /// critical state (flows that shear far past the peak: collapses, silos) or the peak
-    /// (dense material sheared less than the peak's strain over the run: a flow starting from
-    /// rest, a pile).
+    /// Which strength `--write` records as the friction angle: the biaxial test's critical
+    /// state (flows that shear far past the peak: collapses, silos) or peak (dense material
+    /// sheared less than the peak's strain over the run: a flow starting from rest), or the
+    /// angle of repose of poured DEM piles (Yue 2018 §3.3: layers that flow on a slope and
+    /// stop, chutes).
     #[arg(long, value_enum, default_value_t = Strength::Critical, conflicts_with = "shear")]
     pub strength: Strength,
     /// Friction coefficient of the grains while the sample consolidates (restored before the
@@ -86,6 +88,13 @@ pub struct CalibrateArgs {
     /// Shear strain held at each inertial number (the first quarter is the transient).
     #[arg(long, default_value_t = 2.0)]
     pub strain: f64,
+    /// Piles poured for `--strength repose` (seeds `--seed` on), their angles averaged: one
+    /// pile's flanks scatter by about a degree.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    pub piles: u64,
+    /// Width of the piles' rough floor [mean grain diameters] (`--strength repose`).
+    #[arg(long, default_value_t = 100.0)]
+    pub repose_width: f64,
 }
 
 /// The biaxial test's strength a scene's continuum takes as its friction angle.
@@ -95,6 +104,9 @@ pub enum Strength {
     Critical,
     /// The largest mobilized friction.
     Peak,
+    /// The continuum whose layer on a slope stops at the poured piles' angle of repose θ_r:
+    /// sin φ = tan θ_r ([`repose`]).
+    Repose,
 }
 
 /// One record of the test.
@@ -136,6 +148,8 @@ pub struct Calibration {
     /// The sample's packing fraction when the shortening starts (grain area over the box's):
     /// the peak belongs to this state, and a denser bed has a higher one.
     pub packing: f64,
+    /// The piles of `--strength repose` (none otherwise).
+    pub piles: Vec<repose::Pile>,
 }
 
 impl Calibration {
@@ -144,7 +158,13 @@ impl Calibration {
         match strength {
             Strength::Critical => self.critical,
             Strength::Peak => self.peak,
+            Strength::Repose => repose::continuum_angle(self.repose_angle()),
         }
+    }
+
+    /// The piles' mean angle of repose [deg] (NaN without piles).
+    pub fn repose_angle(&self) -> f64 {
+        self.piles.iter().map(repose::Pile::angle).sum::<f64>() / self.piles.len() as f64
     }
 
     fn young_of(&self, plane: f64, poisson: f64) -> f64 {
@@ -332,6 +352,7 @@ pub fn biaxial(scene: &Scene, material: usize, o: &CalibrateOptions) -> anyhow::
         e0_plane,
         lateral_mean,
         packing,
+        piles: Vec::new(),
     })
 }
 
@@ -455,6 +476,14 @@ pub fn provenance(c: &Calibration, o: &CalibrateOptions) -> String {
     let friction = match o.strength {
         Strength::Critical => format!("critical state (mean over axial strain 15-30 %, peak {:.1} deg)", c.peak),
         Strength::Peak => format!("peak (critical state {:.1} deg over axial strain 15-30 %)", c.critical),
+        Strength::Repose => format!(
+            "the continuum whose layer stops at the angle of repose of {} DEM piles poured on a rough floor, {:.2} deg \
+             (sin phi = tan theta; biaxial peak {:.1}, critical state {:.1} deg)",
+            c.piles.len(),
+            c.repose_angle(),
+            c.peak,
+            c.critical
+        ),
     };
     format!(
         "grains calibrate {}: DEM biaxial test of this material ({} grains); friction_angle = {friction}, young = initial \
@@ -472,6 +501,9 @@ pub struct CalibrateOptions {
     pub inertial: f64,
     pub strength: Strength,
     pub prep_friction: Option<f64>,
+    /// Piles and their floor's width [D50] of `Strength::Repose` (not read otherwise).
+    pub piles: u64,
+    pub repose_width: f64,
 }
 
 impl std::fmt::Display for CalibrateOptions {
@@ -488,6 +520,7 @@ impl std::fmt::Display for CalibrateOptions {
         match self.strength {
             Strength::Critical => Ok(()),
             Strength::Peak => write!(f, " --strength peak"),
+            Strength::Repose => write!(f, " --strength repose --piles {} --repose-width {}", self.piles, self.repose_width),
         }
     }
 }
@@ -508,12 +541,15 @@ impl CalibrateOptions {
                 None => Strength::Critical,
                 Some(&"peak") => Strength::Peak,
                 Some(&"critical") => Strength::Critical,
+                Some(&"repose") => Strength::Repose,
                 Some(_) => return None,
             },
             prep_friction: match value("--prep-friction") {
                 None => None,
                 Some(v) => Some(v.parse().ok()?),
             },
+            piles: value("--piles").map_or(Some(3), |v| v.parse().ok())?,
+            repose_width: value("--repose-width").map_or(Some(100.0), |v| v.parse().ok())?,
         })
     }
 }
@@ -521,7 +557,19 @@ impl CalibrateOptions {
 /// Calibrates the hybrid material of `scene` with `o`: (material index, result).
 pub fn run_for(scene: &Scene, o: &CalibrateOptions) -> anyhow::Result<(usize, Calibration)> {
     let material = hybrid_material(scene)?;
-    Ok((material, biaxial(scene, material, o)?))
+    let mut c = biaxial(scene, material, o)?;
+    if o.strength == Strength::Repose {
+        for seed in o.seed..o.seed + o.piles {
+            tracing::info!(
+                "calibrate: pile {} of {}, floor {} D50 wide, seed {seed}",
+                seed - o.seed + 1,
+                o.piles,
+                o.repose_width
+            );
+            c.piles.push(repose::pile(scene, material, o.repose_width, seed)?);
+        }
+    }
+    Ok((material, c))
 }
 
 pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
@@ -534,6 +582,8 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
         inertial: args.inertial,
         strength: args.strength,
         prep_friction: args.prep_friction,
+        piles: args.piles,
+        repose_width: args.repose_width,
     };
     let mpm = scene.materials[material].mpm.as_ref().expect("checked");
     if args.shear {
@@ -569,6 +619,32 @@ pub fn calibrate(args: &CalibrateArgs) -> anyhow::Result<()> {
         c.lateral_mean,
         c.packing,
     );
+    if !c.piles.is_empty() {
+        println!("pile,x_m,height_m");
+        for (k, p) in c.piles.iter().enumerate() {
+            for (x, h) in &p.surface {
+                println!("{k},{x:.5},{h:.5}");
+            }
+        }
+        for (k, p) in c.piles.iter().enumerate() {
+            println!(
+                "# pile {k} (seed {}): {} grains ({} poured), {:.4} m high, after {:.2} s: flanks {:.2} and {:.2} deg",
+                options.seed + k as u64,
+                p.grains,
+                p.poured,
+                p.height,
+                p.time,
+                p.left,
+                p.right
+            );
+        }
+        println!(
+            "# angle of repose {:.2} deg over {} piles; the continuum whose layer stops there (sin phi = tan theta): {:.2} deg",
+            c.repose_angle(),
+            c.piles.len(),
+            c.friction(Strength::Repose)
+        );
+    }
     if args.write {
         let text = std::fs::read_to_string(&args.scene)?;
         let name = &scene.materials[material].name;
@@ -743,6 +819,8 @@ mod tests {
             inertial: 1e-3,
             strength: Strength::Critical,
             prep_friction: None,
+            piles: 3,
+            repose_width: 100.0,
         };
         let c = Calibration {
             records: Vec::new(),
@@ -756,6 +834,7 @@ mod tests {
             e0_plane: 5e5,
             lateral_mean: 1.0,
             packing: 0.82,
+            piles: Vec::new(),
         };
         let p = provenance(&c, &o);
         assert!(
@@ -779,6 +858,38 @@ mod tests {
             "{p}"
         );
         assert_eq!(CalibrateOptions::parse(&p), Some(o));
+        // The piles' strength names its piles and floor, and takes sin φ = tan θ_r of their mean.
+        o.prep_friction = None;
+        o.strength = Strength::Repose;
+        o.piles = 2;
+        o.repose_width = 150.0;
+        let pile = |left, right| repose::Pile {
+            grains: 0,
+            poured: 0,
+            height: 0.0,
+            left,
+            right,
+            time: 0.0,
+            surface: Vec::new(),
+        };
+        let c = Calibration {
+            piles: vec![pile(18.0, 19.0), pile(19.0, 20.0)],
+            ..c
+        };
+        let p = provenance(&c, &o);
+        assert!(
+            p.starts_with(
+                "grains calibrate --grains 2400 --seed 3 --pressure 812.5 --inertial 1e-3 --strength repose --piles 2 --repose-width 150: "
+            ),
+            "{p}"
+        );
+        assert!(
+            p.contains("angle of repose of 2 DEM piles poured on a rough floor, 19.00 deg"),
+            "{p}"
+        );
+        assert_eq!(CalibrateOptions::parse(&p), Some(o));
+        let phi = c.friction(Strength::Repose).to_radians();
+        assert!((phi.sin() - 19f64.to_radians().tan()).abs() < 1e-12);
     }
 
     /// A sample consolidated with frictionless grains packs denser than one at the grains'
@@ -796,6 +907,8 @@ mod tests {
             inertial: 1e-3,
             strength: Strength::Peak,
             prep_friction: None,
+            piles: 3,
+            repose_width: 100.0,
         };
         let loose = biaxial(&scene, material, &o).unwrap();
         o.prep_friction = Some(0.0);
