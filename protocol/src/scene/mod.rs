@@ -36,7 +36,7 @@ pub use coupling::{AutoSteps, ContactForces, Coupling, GrainTransfer};
 pub use domain::Domain;
 pub use errors::SceneError;
 pub use materials::{DemDamping, DemMaterial, Material, MpmMaterial, MpmModel, RateFriction};
-pub use mpm::{MpmDomainWalls, MpmKernel, MpmSettings};
+pub use mpm::{MpmDomainWalls, MpmInitialStress, MpmKernel, MpmSettings};
 pub use oracle::{Oracle, OracleKind, ShearBand};
 pub use output::Output;
 pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};

@@ -14,6 +14,19 @@ pub struct MpmSettings {
     pub flip: Option<f64>,
     /// Condition on the three outer node layers of the domain faces.
     pub domain_walls: MpmDomainWalls,
+    /// The points' stress at the start.
+    pub initial_stress: MpmInitialStress,
+}
+
+/// The continuum's stress at the start of a run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MpmInitialStress {
+    /// Unstressed: the continuum first settles under its weight (a wave through its depth).
+    None,
+    /// At rest under its own weight along −y: σ_yy the weight of the body above the point,
+    /// σ_xx (and σ_zz) K0 σ_yy, K0 the elastic one, ν / (1 − ν), or the least the friction
+    /// holds, (1 − sin φ) / (1 + sin φ). For a bed the grains start in loaded (a poured packing).
+    Geostatic,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -34,6 +47,7 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawMpm>) -> Result<MpmSettings, S
         kernel: MpmKernel::Gimp,
         flip: Some(0.98),
         domain_walls: MpmDomainWalls::Slip,
+        initial_stress: MpmInitialStress::None,
     };
     let Some(m) = raw else { return Ok(out) };
     if let Some(n) = &m.points_per_axis {
@@ -73,6 +87,19 @@ pub(super) fn validate(ctx: &Ctx, raw: Option<&RawMpm>) -> Result<MpmSettings, S
             }
         };
     }
+    if let Some(w) = &m.initial_stress {
+        out.initial_stress = match w.get_ref().as_str() {
+            "none" => MpmInitialStress::None,
+            "geostatic" => MpmInitialStress::Geostatic,
+            other => {
+                return Err(ctx.err(
+                    Some(w.span()),
+                    Some("mpm.initial_stress"),
+                    format!("must be \"none\" or \"geostatic\", got {other:?}"),
+                ));
+            }
+        };
+    }
     Ok(out)
 }
 
@@ -97,5 +124,28 @@ fn transfer(ctx: &Ctx, m: &RawMpm) -> Result<Option<f64>, SceneError> {
             Some("mpm.transfer"),
             format!("must be \"flip\" or \"apic\", got {other:?}"),
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{GOOD, check_err, line_of};
+    use super::super::{Path, from_str};
+    use super::MpmInitialStress;
+
+    #[test]
+    fn the_initial_stress_is_none_unless_geostatic_is_asked_and_nothing_else_is_taken() {
+        let s = from_str(GOOD, Path::new("s.toml"), 0).unwrap();
+        assert_eq!(s.mpm.initial_stress, MpmInitialStress::None);
+        let text = format!("{GOOD}[mpm]\ninitial_stress = \"geostatic\"\n");
+        let s = from_str(&text, Path::new("s.toml"), 0).unwrap();
+        assert_eq!(s.mpm.initial_stress, MpmInitialStress::Geostatic);
+        let text = format!("{GOOD}[mpm]\ninitial_stress = \"k0\"\n");
+        check_err(
+            &text,
+            Some(line_of(&text, "initial_stress")),
+            "mpm.initial_stress",
+            "\"none\" or \"geostatic\"",
+        );
     }
 }

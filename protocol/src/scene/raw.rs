@@ -95,6 +95,7 @@ pub struct RawMpm {
     pub transfer: Option<Spanned<String>>,
     pub flip: Option<Spanned<f64>>,
     pub domain_walls: Option<Spanned<String>>,
+    pub initial_stress: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]

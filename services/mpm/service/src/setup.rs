@@ -6,10 +6,13 @@ use grains_grid::{Grid, Space};
 use grains_mpm::boundary::{Contact, Geometry, Wall};
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
 use grains_mpm::constitutive::plasticity_drucker_prager::{DruckerPragerYue, InertialFriction};
+use grains_mpm::matrix::Matrix;
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{DOMAIN_WALL_NODES, MAX_CFL, Model, MpmParams, PointLoads, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, seed};
-use grains_protocol::scene::{ContactForces, Material, Model as BodyModel, MpmDomainWalls, MpmModel, Scene, Shape, WallShape};
+use grains_protocol::scene::{
+    ContactForces, Material, Model as BodyModel, MpmDomainWalls, MpmInitialStress, MpmModel, Scene, Shape, WallShape,
+};
 use grains_protocol::wire::Zone;
 use grains_service::zones::ZoneField;
 
@@ -77,6 +80,15 @@ pub fn check(scene: &Scene) -> Result<(), (String, String)> {
                 "an MPM segment wall is 2D only (a thin rod holds no continuum in 3D): use a \"plane\" or \"box\"".into(),
             ));
         }
+    }
+    if scene.mpm.initial_stress == MpmInitialStress::Geostatic && scene.gravity[1] >= 0.0 {
+        return Err((
+            "mpm.initial_stress".into(),
+            format!(
+                "\"geostatic\" weighs the body above each point along -y: gravity needs a downward y component, got {:?}",
+                scene.gravity
+            ),
+        ));
     }
     let dim = scene.dim();
     let h = scene.domain.cell_size;
@@ -154,11 +166,15 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
     let (material_index, material) = mpm_material(scene)?;
     let (grid, kernel) = grains_service::grid::scene_grid(scene);
     let walls = walls::<S>(scene);
-    let pts = seed_points::<S>(scene, zones, (material_index, material), &grid, &walls);
+    let mut pts = seed_points::<S>(scene, zones, (material_index, material), &grid, &walls);
+    let model = model(material, dim);
+    if scene.mpm.initial_stress == MpmInitialStress::Geostatic {
+        geostatic(scene, material, &model, &mut pts);
+    }
     let params = MpmParams {
         grid,
         kernel,
-        model: model(material, dim),
+        model,
         gravity: vec::<S>(scene.gravity),
         transfer: match scene.mpm.flip {
             Some(beta) => Transfer::Flip(beta),
@@ -178,6 +194,50 @@ pub fn build<S: MpmSpace>(scene: &Scene, zones: &ZoneField) -> Result<(Points<S>
         ambient_pressure: scene.bodies.iter().map(|b| b.confining_pressure).fold(0.0, f64::max),
     };
     Ok((pts, params))
+}
+
+/// `mpm.initial_stress = "geostatic"`: every point at rest under the weight of its body above
+/// it along −y, σ_yy = −ρ g_y (top − y), σ_xx = σ_zz = K0 σ_yy with the elastic K0 = ν / (1 − ν)
+/// or, where that would lie outside the friction cone, the least it holds, (1 − sin φ) / (1 +
+/// sin φ); its elastic strain b^e is the one of that stress (as for points made from grains).
+/// The top is the body's (a box's upper face, a ball's surface over the point), so a hybrid
+/// body's grains above the continuum weigh on it at the continuum's density.
+fn geostatic<S: MpmSpace>(scene: &Scene, material: &Material, model: &Model, pts: &mut Points<S>) {
+    let mpm = material.mpm.as_ref().expect("an MPM material");
+    let k0 = (mpm.poisson / (1.0 - mpm.poisson)).max(geostatic_k0_floor(mpm.friction_angle));
+    let weight = bulk_density(material) * -scene.gravity[1];
+    for k in 0..pts.len() {
+        let [x, y, z] = S::to_array(pts.x[k]);
+        let top = scene
+            .bodies
+            .iter()
+            .filter(|b| b.model != BodyModel::Dem)
+            .filter_map(|b| match b.shape {
+                Shape::Box { min, max } => {
+                    let inside = (0..scene.dim())
+                        .filter(|&a| a != 1)
+                        .all(|a| (min[a]..=max[a]).contains(&[x, y, z][a]));
+                    (inside && y <= max[1]).then_some(max[1])
+                }
+                Shape::Ball { center, radius } => {
+                    let across = (x - center[0]).powi(2) + if scene.dim() == 3 { (z - center[2]).powi(2) } else { 0.0 };
+                    (across <= radius * radius).then(|| center[1] + (radius * radius - across).sqrt())
+                }
+            })
+            .fold(y, f64::max);
+        let syy = -weight * (top - y);
+        let sigma = <S::M as Matrix>::from_rows3([[k0 * syy, 0.0, 0.0], [0.0, syy, 0.0], [0.0, 0.0, k0 * syy]]);
+        let b_e = model.strain_of_stress(&sigma);
+        pts.b_e[k] = b_e;
+        pts.tau[k] = model.kirchhoff(&b_e);
+    }
+}
+
+/// The least K0 = σ_xx / σ_yy that the plane Mohr–Coulomb cone of friction angle φ [deg] holds:
+/// (σ_yy − σ_xx) / (σ_yy + σ_xx) = sin φ.
+pub fn geostatic_k0_floor(friction_angle: f64) -> f64 {
+    let s = friction_angle.to_radians().sin();
+    (1.0 - s) / (1.0 + s)
 }
 
 /// The scene's walls as the MPM's: geometry (a segment [`SEGMENT_CELLS`] cells thick), contact
