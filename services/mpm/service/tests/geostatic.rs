@@ -43,7 +43,10 @@ point = [0.0, 0.0]
 normal = [0.0, 1.0]
 sticky = true
 "#;
-    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("geostatic_layer.toml");
+    // A file of its own per call: the tests run at once.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("geostatic_layer_{n}.toml"));
     std::fs::write(&path, text).unwrap();
     let mut s = scene::load(&path).expect("test scene");
     s.mpm.initial_stress = initial;
