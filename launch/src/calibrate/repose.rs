@@ -12,6 +12,7 @@
 //! `a_continuum_layer_on_an_incline_slides_as_a_coulomb_block`), so the continuum whose
 //! flanks stop where the grains' do has sin φ = tan θ_r.
 
+use crate::validate::stats::slope;
 use anyhow::{Context, bail};
 use grains_dem::pipeline::DemPipeline;
 use grains_dem::space::{D2, Space};
@@ -50,19 +51,6 @@ pub fn continuum_angle(repose: f64) -> f64 {
     repose.to_radians().tan().asin().to_degrees()
 }
 
-/// The least-squares slope of `points` (x, y); `None` under three points.
-pub fn slope(points: &[(f64, f64)]) -> Option<f64> {
-    if points.len() < 3 {
-        return None;
-    }
-    let n = points.len() as f64;
-    let mx = points.iter().map(|p| p.0).sum::<f64>() / n;
-    let my = points.iter().map(|p| p.1).sum::<f64>() / n;
-    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
-    (sxx > 0.0).then(|| sxy / sxx)
-}
-
 /// The flank angles [deg] (left, right) of a heap on a floor of half-width `half` centred at
 /// x = 0: the surface (bin centre, height) fitted over 15–85 % of each half, so that neither
 /// the rounded top nor the toe at the floor's end weighs in.
@@ -73,7 +61,9 @@ pub fn flank_angles(surface: &[(f64, f64)], half: f64) -> Option<(f64, f64)> {
             .filter(|p| p.0 * sign > 0.0 && (0.15 * half..=0.85 * half).contains(&(p.0 * sign)))
             .map(|p| (p.0 * sign, p.1))
             .collect();
-        slope(&pts).map(|s| (-s).atan().to_degrees())
+        // At least three bins, and a slope (the fit is validate's).
+        let s = slope(&pts);
+        (pts.len() >= 3 && s.is_finite()).then(|| (-s).atan().to_degrees())
     };
     Some((side(-1.0)?, side(1.0)?))
 }
@@ -102,7 +92,7 @@ pub fn surface(x: &[[f64; 2]], r: &[f64], half: f64, bin: f64, floor_top: f64) -
 pub fn pile(scene: &Scene, material: usize, width_d: f64, seed: u64) -> anyhow::Result<Pile> {
     if scene.dimension != Dimension::Two {
         bail!(crate::run::BadInput(
-            "grains calibrate --repose pours a 2D pile; the 3D pile is not built yet".into()
+            "grains calibrate --strength repose pours a 2D pile; the 3D pile is not built yet".into()
         ));
     }
     if !(width_d.is_finite() && width_d >= 20.0) {
@@ -115,7 +105,9 @@ pub fn pile(scene: &Scene, material: usize, width_d: f64, seed: u64) -> anyhow::
     let d = 2.0 * dem.radius;
     let g = scene.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
     if g <= 0.0 {
-        bail!(crate::run::BadInput("grains calibrate --repose needs the scene's gravity".into()));
+        bail!(crate::run::BadInput(
+            "grains calibrate --strength repose needs the scene's gravity".into()
+        ));
     }
     let half = 0.5 * width_d * d;
     // The tallest heap the pour can build (flanks at 35°), and room above it for the stream.
