@@ -1,16 +1,25 @@
 //! A sand block collapsing in a unit box, timed: `cargo run --release -p grains-mpm --example
-//! collapse -- <dim 2|3> <cells per axis> <fill> <threads> <steps>`. Prints µs per point-step
-//! and where the time goes (the profiling companion of `grains bench mpm`).
+//! collapse -- <dim 2|3> <cells per axis> <fill> <threads> <steps> [bspline|gimp] [cs|dp]
+//! [periodic 0|1]`. Prints µs per point-step and where the time goes (the profiling companion
+//! of `grains bench mpm`; `gimp dp 1` is the chute's continuum: GIMP, Drucker–Prager, a
+//! periodic x axis).
 
 use grains_grid::{D2, D3, Grid, Kernel, Space};
 use grains_mpm::boundary::Contact;
 use grains_mpm::constitutive::hencky_critical_state::HenckyCriticalState;
+use grains_mpm::constitutive::plasticity_drucker_prager::DruckerPragerYue;
 use grains_mpm::matrix::MpmSpace;
 use grains_mpm::pipeline::{Model, MpmParams, MpmPipeline, PhaseTimes, Transfer, cfl_time_step};
 use grains_mpm::points::{Points, Region, seed};
 use std::time::Instant;
 
-fn run<S: MpmSpace + Space>(n: usize, fill: f64, threads: usize, steps: usize) {
+struct Options {
+    gimp: bool,
+    drucker_prager: bool,
+    periodic: bool,
+}
+
+fn run<S: MpmSpace + Space>(n: usize, fill: f64, threads: usize, steps: usize, o: &Options) {
     let h = 1.0 / n as f64;
     let cells = ((fill * (n - 6) as f64).round() as usize).max(1);
     let mut lo = [0.0; 3];
@@ -23,15 +32,19 @@ fn run<S: MpmSpace + Space>(n: usize, fill: f64, threads: usize, steps: usize) {
     let (young, nu, rho) = (3.537e5, 0.3, 2200.0);
     let shear = young / (2.0 * (1.0 + nu));
     let lambda = young * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
-    let model = Model::CriticalState(HenckyCriticalState {
-        bulk: lambda + 2.0 * shear / S::DIM as f64,
-        shear,
-        tan_friction_cs: 30f64.to_radians().tan(),
-        packing_cs: 0.6,
-        chi: 0.0,
-        xi: 0.0,
-        cohesion: 0.0,
-    });
+    let model = if o.drucker_prager {
+        Model::Yue(DruckerPragerYue::new(young, nu, 30.0, S::DIM))
+    } else {
+        Model::CriticalState(HenckyCriticalState {
+            bulk: lambda + 2.0 * shear / S::DIM as f64,
+            shear,
+            tan_friction_cs: 30f64.to_radians().tan(),
+            packing_cs: 0.6,
+            chi: 0.0,
+            xi: 0.0,
+            cohesion: 0.0,
+        })
+    };
     let mut pts = Points::<S>::default();
     let vol = (h / 2.0).powi(S::DIM as i32);
     for x in seed::<S>(Region::Box { min: lo, max: hi }, [0.0; 3], h, 2) {
@@ -40,8 +53,12 @@ fn run<S: MpmSpace + Space>(n: usize, fill: f64, threads: usize, steps: usize) {
     let mut g = [0.0; 3];
     g[1] = -9.81;
     let params = MpmParams {
-        grid: Grid::covering([0.0; 3], [1.0; 3], h, S::DIM),
-        kernel: Kernel::Bspline2,
+        grid: Grid::covering([0.0; 3], [1.0; 3], h, S::DIM).with_periodic([o.periodic, false, false]),
+        kernel: if o.gimp {
+            Kernel::Gimp { half_width: h / 4.0 }
+        } else {
+            Kernel::Bspline2
+        },
         model,
         gravity: S::from_array(g),
         transfer: Transfer::Flip(0.95),
@@ -87,9 +104,14 @@ fn main() {
         arg(4, "1").parse().unwrap(),
         arg(5, "100").parse().unwrap(),
     );
+    let o = Options {
+        gimp: arg(6, "bspline") == "gimp",
+        drucker_prager: arg(7, "cs") == "dp",
+        periodic: arg(8, "0") == "1",
+    };
     if dim == 2 {
-        run::<D2>(n, fill, threads, steps)
+        run::<D2>(n, fill, threads, steps, &o)
     } else {
-        run::<D3>(n, fill, threads, steps)
+        run::<D3>(n, fill, threads, steps, &o)
     }
 }

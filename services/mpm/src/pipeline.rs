@@ -303,12 +303,13 @@ fn for_stencil<S: Space>(grid: &Grid, map: &BlockMap, st: &Stencil, x: S::V, mut
             *ra = grid.origin[k] + grid.h * (st.start[k] + a as i64) as f64 - xa[k];
         }
     }
+    let slots = map.stencil_nodes(st.start);
     let nz = if S::DIM == 3 { 3 } else { 1 };
     for c in 0..nz {
         for b in 0..3 {
             let (wy, wz, dwy, dwz) = (st.w[1][b], st.w[2][c], st.dw[1][b], st.dw[2][c]);
             for a in 0..3 {
-                let slot = map.slot([st.start[0] + a as i64, st.start[1] + b as i64, st.start[2] + c as i64]);
+                let slot = slots[a + 3 * b + 9 * c];
                 let wx = st.w[0][a];
                 let w = wx * wy * wz;
                 let grad = S::from_array([st.dw[0][a] * wy * wz, wx * dwy * wz, wx * wy * dwz]);

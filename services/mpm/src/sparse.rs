@@ -141,6 +141,42 @@ impl BlockMap {
         ((page as usize) << (SHIFT as usize * self.dim)) + local as usize
     }
 
+    /// Storage indices of the 3^d nodes of the stencil starting at `start`, x fastest (index
+    /// a + 3 b + 9 c for node start + (a, b, c); the unused layers of 2D are 0); its blocks must
+    /// be active. The per-node work of P2G and G2P: each axis is wrapped once, not per node.
+    #[inline(always)]
+    pub fn stencil_nodes(&self, start: [i64; 3]) -> [usize; 27] {
+        let mut block = [[0usize; 3]; 3];
+        let mut local = [[0i64; 3]; 3];
+        for k in 0..self.dim {
+            let p = self.period[k];
+            let s = wrap_index(start[k], p);
+            for a in 0..3 {
+                let mut i = s + a as i64;
+                if p > 0 && i >= p {
+                    i -= p;
+                }
+                block[k][a] = (i >> SHIFT) as usize;
+                local[k][a] = i & (BLOCK - 1);
+            }
+        }
+        let shift = SHIFT as usize * self.dim;
+        let mut out = [0usize; 27];
+        let nz = if self.dim == 3 { 3 } else { 1 };
+        for c in 0..nz {
+            for b in 0..3 {
+                let row = self.blocks[0] * (block[1][b] + self.blocks[1] * block[2][c]);
+                let lrow = BLOCK * (local[1][b] + BLOCK * local[2][c]);
+                for a in 0..3 {
+                    let page = self.page[block[0][a] + row];
+                    debug_assert!(page != INACTIVE, "a stencil node of an inactive block");
+                    out[a + 3 * b + 9 * c] = ((page as usize) << shift) + (local[0][a] + lrow) as usize;
+                }
+            }
+        }
+        out
+    }
+
     /// The lowest and the highest storage index of the 3^d nodes of the stencil starting at
     /// `start` (slots follow block order, x fastest, so they are those of the corners of
     /// per-axis lowest and highest wrapped nodes); its blocks must be active.
@@ -195,6 +231,10 @@ mod tests {
         // Stencil x 5..7, y 6..8, z 7..9 spans blocks 1 × {1, 2} × {1, 2}; 30..32 spans blocks
         // 7..8 on every axis.
         assert_eq!(map.active_blocks(), 4 + 8);
+        let slots = map.stencil_nodes([5, 6, 7]);
+        for (n, &slot) in slots.iter().enumerate() {
+            assert_eq!(slot, map.slot([5 + n as i64 % 3, 6 + (n as i64 / 3) % 3, 7 + n as i64 / 9]));
+        }
         for ijk in [[5, 6, 7], [7, 8, 9], [6, 7, 8], [30, 31, 32], [32, 32, 32]] {
             let s = map.slot(ijk);
             assert!(s < map.len());
@@ -221,6 +261,15 @@ mod tests {
         // The open axis still rejects a stencil beyond the grid.
         assert_eq!(map.clone().rebuild([[3, 7, 0]].into_iter()), Err(0));
         // The stencil across the end spans every x block: lowest slot at x = 0, highest at 8.
+        // The stencil's slots are the nodes' own, wrapped.
+        for start in [[7i64, 2, 0], [-1, 2, 0]] {
+            let slots = map.stencil_nodes(start);
+            for b in 0..3 {
+                for a in 0..3 {
+                    assert_eq!(slots[a + 3 * b], map.slot([start[0] + a as i64, start[1] + b as i64, 0]));
+                }
+            }
+        }
         let (lo, hi) = map.stencil_slots([7, 2, 0]);
         assert_eq!((lo, hi), (map.slot([0, 2, 0]), map.slot([8, 4, 0])));
     }
