@@ -201,6 +201,9 @@ struct Row {
     flux: f64,
     /// The pure DEM's: its flux on every pour, the first (`flux`) included; empty for a hybrid.
     pours: Vec<f64>,
+    /// The pure DEM's wall time on every pour [s]: `sample` takes their mean (the runs are
+    /// the same size; a shared machine slows one of them by up to 40%).
+    pour_walls: Vec<f64>,
     /// Mass and down-slope momentum per `SLAB` above y = 0 at the end (grains and points; the
     /// pure DEM's summed over its pours).
     profile: Vec<(f64, f64)>,
@@ -321,8 +324,9 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
         };
         // The pure DEM on every pour. The same DEM step, 20 to a macro-step: the launcher's
         // per-macro-step cost (summaries, metrics) stays out of the DEM's figure.
-        let mut dem = None;
+        let mut dem: Option<(Sample, u64, f64)> = None;
         let mut pours = Vec::new();
+        let (mut pour_walls, mut pour_steps) = (Vec::new(), Vec::new());
         let mut dem_profile: Vec<(f64, f64)> = Vec::new();
         for seed in 1..=args.pours {
             let mut o: Vec<String> = base.iter().cloned().chain([on(&packing(args, r, seed)?)]).collect();
@@ -337,6 +341,8 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             let pour = if seed == 1 { String::new() } else { format!(" seed={seed}") };
             let (sample, grains, _, flux, profile) = one(args, &format!("DEM r={radius_mm}mm{pour}"), &o)?;
             pours.push(flux);
+            pour_walls.push(sample.wall);
+            pour_steps.push(sample.dem_step);
             if dem_profile.len() < profile.len() {
                 dem_profile.resize(profile.len(), (0.0, 0.0));
             }
@@ -346,7 +352,9 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             }
             dem.get_or_insert((sample, grains, flux));
         }
-        let (sample, dem_grains, flux) = dem.expect("at least one pour");
+        let (mut sample, dem_grains, flux) = dem.expect("at least one pour");
+        sample.wall = mean_sd(&pour_walls).0;
+        sample.dem_step = mean_sd(&pour_steps).0;
         rows.push(Row {
             radius: r,
             cell: 0.0,
@@ -357,6 +365,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             sample,
             flux,
             pours,
+            pour_walls,
             profile: dem_profile,
         });
         let base = on_first;
@@ -385,6 +394,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                     sample,
                     flux,
                     pours: Vec::new(),
+                    pour_walls: Vec::new(),
                     profile,
                 });
             }
@@ -477,8 +487,8 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     let mut md = format!(
         "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
          from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
-         solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
-         hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
+         solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time (the mean \
+         over its pours) over the hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
          of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
          Discrete base over the floor: {:.1} mm. Continuum: {}.\n\n\
          Surface: the mean down-slope velocity of the top {:.0}% of the mass; profile L1: Σ m |v − v_DEM| / Σ m |v_DEM| over \
@@ -536,11 +546,14 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     }
     for r in rows.iter().filter(|r| r.pours.len() > 1) {
         let each: Vec<String> = r.pours.iter().map(|f| format!("{f:.3}")).collect();
+        let walls: Vec<String> = r.pour_walls.iter().map(|w| format!("{w:.1}")).collect();
         md.push_str(&format!(
-            "\nThe pure DEM's flux at r = {} mm on its {} pours: {} kg/(m s).\n",
+            "\nThe pure DEM's flux at r = {} mm on its {} pours: {} kg/(m s); its wall time: {} s (its row and the \
+             speed-ups take their mean).\n",
             r.radius * 1e3,
             r.pours.len(),
-            each.join(", ")
+            each.join(", "),
+            walls.join(", ")
         ));
     }
     if let Some(best) = rows
@@ -631,7 +644,7 @@ fn extrapolate(c: &Costs, rows: &[Row], depth: f64) -> String {
 mod tests {
     use super::*;
 
-    fn row(cell: f64, flux: f64, pours: Vec<f64>) -> Row {
+    fn row(cell: f64, flux: f64, pours: Vec<f64>, pour_walls: Vec<f64>) -> Row {
         let sample = Sample {
             grains: 100.0,
             points: 0.0,
@@ -651,6 +664,7 @@ mod tests {
             sample,
             flux,
             pours,
+            pour_walls,
             profile: vec![(1.0, 0.0), (1.0, 0.1), (1.0, 0.2)],
         }
     }
@@ -659,7 +673,10 @@ mod tests {
     /// table shows the pours' spread (the sample standard deviation).
     #[test]
     fn the_hybrid_is_compared_with_the_mean_of_the_pours() {
-        let rows = [row(0.0, 36.0, vec![36.0, 30.0, 33.0]), row(0.004, 36.3, Vec::new())];
+        let rows = [
+            row(0.0, 36.0, vec![36.0, 30.0, 33.0], vec![1.0, 1.2, 0.8]),
+            row(0.004, 36.3, Vec::new(), Vec::new()),
+        ];
         assert_eq!(dem_flux(&rows, 5e-4), 33.0);
         assert_eq!(mean_sd(&[36.0, 30.0, 33.0]), (33.0, 3.0));
         assert_eq!(mean_sd(&[36.0]), (36.0, 0.0));
@@ -680,7 +697,10 @@ mod tests {
         let md = table(&args, &rows, None);
         assert!(md.contains("| 33.000 ± 3.000 | +9.1% | 0.2000 | +0.0% | 0.00 |"), "{md}");
         assert!(md.contains("| 36.300 | +10.0% | 0.2000 | +0.0% | 0.00 |"), "{md}");
-        assert!(md.contains("on its 3 pours: 36.000, 30.000, 33.000 kg/(m s)"), "{md}");
+        assert!(
+            md.contains("on its 3 pours: 36.000, 30.000, 33.000 kg/(m s); its wall time: 1.0, 1.2, 0.8 s"),
+            "{md}"
+        );
     }
 
     /// A plug riding on a slip at the floor carries a shear profile's flux with another
