@@ -31,18 +31,19 @@ pub struct Costs {
 /// Measured on a 2-core machine of this project's kind by `grains bench chute --radii 0.5
 /// --cells 0.004 --depths 0.0167,0.05 --depth 0.15 --pours 4` (2026-12-07; the periodic chute
 /// 0.2 × 0.15 m from poured packings of 31,852 grains; the pure DEM on two threads, 20 DEM
-/// steps per macro-step, its time the mean of its four pours; two hybrids on 4-mm cells with
-/// 1,750 and 2,580 grains and about 7,200 points of the geostatic Drucker–Prager continuum,
-/// k = 22, two threads per solver): the costs fitted to those runs, which the model then
-/// reproduces within 5% (27.1 s, 2.4 s and 3.3 s measured; 26.9, 2.4 and 3.4 s modelled). The
-/// same machine ran the same DEM 30% faster earlier that day: the ratios, not the seconds,
-/// are what carries over. A settled packing's DEM costs twice or more per grain-step what a
-/// loose lattice's does (its contacts are there from the start).
+/// steps per macro-step; two hybrids on 4-mm cells with 1,750 and 2,580 grains and about
+/// 7,200 points of the geostatic Drucker–Prager continuum, k = 22, two threads per solver,
+/// each run after every pour; the medians of the four runs of each): the costs fitted to those
+/// runs, which the model then reproduces within 5% (23.2 s, 2.2 s and 3.1 s measured; 23.1,
+/// 2.2 and 3.2 s modelled). The same machine ran the same DEM up to twice as slowly within the
+/// hour: the ratios, not the seconds, are what carries over. A settled packing's DEM costs
+/// twice or more per grain-step what a loose lattice's does (its contacts are there from the
+/// start).
 pub const MEASURED: Costs = Costs {
-    dem_hybrid: 8.9e-8,
-    dem_alone: 6.1e-8,
-    mpm: 2.64e-7,
-    step: 2.95e-4,
+    dem_hybrid: 8.1e-8,
+    dem_alone: 5.2e-8,
+    mpm: 2.46e-7,
+    step: 3.87e-4,
 };
 
 /// The sizes a prediction needs.

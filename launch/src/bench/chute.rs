@@ -201,9 +201,9 @@ struct Row {
     flux: f64,
     /// The pure DEM's: its flux on every pour, the first (`flux`) included; empty for a hybrid.
     pours: Vec<f64>,
-    /// The pure DEM's wall time on every pour [s]: `sample` takes their mean (the runs are
-    /// the same size; a shared machine slows one of them by up to 40%).
-    pour_walls: Vec<f64>,
+    /// Wall time of every run of the row [s] (the pure DEM's pours; a hybrid's runs, one after
+    /// each pour): `sample` takes their median.
+    walls: Vec<f64>,
     /// Mass and down-slope momentum per `SLAB` above y = 0 at the end (grains and points; the
     /// pure DEM's summed over its pours).
     profile: Vec<(f64, f64)>,
@@ -322,12 +322,35 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             Continuum::Scene => Vec::new(),
             Continuum::CriticalState => critical_state_overrides(args, &on_first, &first)?,
         };
-        // The pure DEM on every pour. The same DEM step, 20 to a macro-step: the launcher's
-        // per-macro-step cost (summaries, metrics) stays out of the DEM's figure.
+        // The hybrids' overrides, each run on the first pour.
+        let mut hybrids = Vec::new();
+        for &h in &args.cells {
+            for &f in &args.depths {
+                let mut o = on_first.clone();
+                o.extend(continuum.iter().cloned());
+                o.extend([
+                    format!("domain.cell_size={h}"),
+                    format!("domain.min=[0.0,{:e}]", -3.0 * h),
+                    format!("coupling.discrete_layer={:e}", f * args.depth),
+                    format!("coupling.hybrid_band={:e}", args.band * h),
+                    format!("coupling.discrete_base={:e}", args.base),
+                    format!("coupling.dem_dt={dt:e}"),
+                    "run.threads=2".into(),
+                ]);
+                hybrids.push((h, f, format!("hybrid r={radius_mm}mm H={}mm depth={f}", h * 1e3), o));
+            }
+        }
+        // The pure DEM on every pour, each pour followed by every hybrid: the hybrids' times
+        // are taken beside the DEM's through the whole bench (a shared machine's speed drifts
+        // by 2× over minutes), and their row takes the median (the same run every time). The
+        // same DEM step, 20 to a macro-step: the launcher's per-macro-step cost (summaries,
+        // metrics) stays out of the DEM's figure.
         let mut dem: Option<(Sample, u64, f64)> = None;
         let mut pours = Vec::new();
-        let (mut pour_walls, mut pour_steps) = (Vec::new(), Vec::new());
+        let mut dem_runs = Vec::new();
         let mut dem_profile: Vec<(f64, f64)> = Vec::new();
+        let mut hybrid_rows: Vec<Row> = Vec::new();
+        let mut hybrid_runs: Vec<Vec<Sample>> = vec![Vec::new(); hybrids.len()];
         for seed in 1..=args.pours {
             let mut o: Vec<String> = base.iter().cloned().chain([on(&packing(args, r, seed)?)]).collect();
             o.extend([
@@ -341,8 +364,7 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             let pour = if seed == 1 { String::new() } else { format!(" seed={seed}") };
             let (sample, grains, _, flux, profile) = one(args, &format!("DEM r={radius_mm}mm{pour}"), &o)?;
             pours.push(flux);
-            pour_walls.push(sample.wall);
-            pour_steps.push(sample.dem_step);
+            dem_runs.push(sample);
             if dem_profile.len() < profile.len() {
                 dem_profile.resize(profile.len(), (0.0, 0.0));
             }
@@ -351,10 +373,27 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
                 d.1 += p.1;
             }
             dem.get_or_insert((sample, grains, flux));
+            for ((h, f, label, o), runs) in hybrids.iter().zip(&mut hybrid_runs) {
+                let (sample, grains, points, flux, profile) = one(args, label, o)?;
+                runs.push(sample);
+                if seed == 1 {
+                    hybrid_rows.push(Row {
+                        radius: r,
+                        cell: *h,
+                        depth: *f,
+                        grains,
+                        dem_grains: 0,
+                        points,
+                        sample,
+                        flux,
+                        pours: Vec::new(),
+                        walls: Vec::new(),
+                        profile,
+                    });
+                }
+            }
         }
-        let (mut sample, dem_grains, flux) = dem.expect("at least one pour");
-        sample.wall = mean_sd(&pour_walls).0;
-        sample.dem_step = mean_sd(&pour_steps).0;
+        let (sample, dem_grains, flux) = dem.expect("at least one pour");
         rows.push(Row {
             radius: r,
             cell: 0.0,
@@ -362,42 +401,17 @@ pub fn bench(args: &ChuteArgs) -> anyhow::Result<()> {
             grains: dem_grains,
             dem_grains,
             points: 0,
-            sample,
+            sample: median_time(sample, &dem_runs),
             flux,
             pours,
-            pour_walls,
+            walls: dem_runs.iter().map(|s| s.wall).collect(),
             profile: dem_profile,
         });
-        let base = on_first;
-        for &h in &args.cells {
-            for &f in &args.depths {
-                let mut o = base.clone();
-                o.extend(continuum.iter().cloned());
-                o.extend([
-                    format!("domain.cell_size={h}"),
-                    format!("domain.min=[0.0,{:e}]", -3.0 * h),
-                    format!("coupling.discrete_layer={:e}", f * args.depth),
-                    format!("coupling.hybrid_band={:e}", args.band * h),
-                    format!("coupling.discrete_base={:e}", args.base),
-                    format!("coupling.dem_dt={dt:e}"),
-                    "run.threads=2".into(),
-                ]);
-                let label = format!("hybrid r={radius_mm}mm H={}mm depth={f}", h * 1e3);
-                let (sample, grains, points, flux, profile) = one(args, &label, &o)?;
-                rows.push(Row {
-                    radius: r,
-                    cell: h,
-                    depth: f,
-                    grains,
-                    dem_grains,
-                    points,
-                    sample,
-                    flux,
-                    pours: Vec::new(),
-                    pour_walls: Vec::new(),
-                    profile,
-                });
-            }
+        for (mut row, runs) in hybrid_rows.into_iter().zip(hybrid_runs) {
+            row.dem_grains = dem_grains;
+            row.sample = median_time(row.sample, &runs);
+            row.walls = runs.iter().map(|s| s.wall).collect();
+            rows.push(row);
         }
     }
     // The costs of the finest grains' runs: the smaller ones pay fixed costs per step that
@@ -483,12 +497,37 @@ fn mean_sd(v: &[f64]) -> (f64, f64) {
     (mean, var.sqrt())
 }
 
+fn seconds(walls: &[f64]) -> String {
+    walls.iter().map(|w| format!("{w:.1}")).collect::<Vec<_>>().join(", ")
+}
+
+/// `first` with its wall and compute times the medians over `runs` (runs of one scene, `first`
+/// among them): one run slowed by the machine (a pour of the 15-cm chute took 45 s where the
+/// other three took 22–23) moves a mean by a quarter of its excess, a median of four not at all.
+fn median_time(first: Sample, runs: &[Sample]) -> Sample {
+    if runs.is_empty() {
+        return first;
+    }
+    let median = |f: fn(&Sample) -> f64| {
+        let mut v: Vec<f64> = runs.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    };
+    Sample {
+        wall: median(|s| s.wall),
+        dem_step: median(|s| s.dem_step),
+        mpm_step: median(|s| s.mpm_step),
+        ..first
+    }
+}
+
 fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     let mut md = format!(
         "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
          from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
-         solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time (the mean \
-         over its pours) over the hybrid's. Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
+         solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
+         hybrid's (with several pours, the medians of their runs: each hybrid runs after every pour). Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
          of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
          Discrete base over the floor: {:.1} mm. Continuum: {}.\n\n\
          Surface: the mean down-slope velocity of the top {:.0}% of the mass; profile L1: Σ m |v − v_DEM| / Σ m |v_DEM| over \
@@ -546,15 +585,25 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
     }
     for r in rows.iter().filter(|r| r.pours.len() > 1) {
         let each: Vec<String> = r.pours.iter().map(|f| format!("{f:.3}")).collect();
-        let walls: Vec<String> = r.pour_walls.iter().map(|w| format!("{w:.1}")).collect();
         md.push_str(&format!(
-            "\nThe pure DEM's flux at r = {} mm on its {} pours: {} kg/(m s); its wall time: {} s (its row and the \
-             speed-ups take their mean).\n",
+            "\nThe pure DEM's flux at r = {} mm on its {} pours: {} kg/(m s); its wall time: {} s.\n",
             r.radius * 1e3,
             r.pours.len(),
             each.join(", "),
-            walls.join(", ")
+            seconds(&r.walls)
         ));
+    }
+    for r in rows.iter().filter(|r| r.cell > 0.0 && r.walls.len() > 1) {
+        md.push_str(&format!(
+            "The hybrid at r = {} mm, H = {} mm, discrete {:.0}%, run after each pour: {} s.\n",
+            r.radius * 1e3,
+            r.cell * 1e3,
+            100.0 * r.depth,
+            seconds(&r.walls)
+        ));
+    }
+    if rows.iter().any(|r| r.walls.len() > 1) {
+        md.push_str("Each row's wall time and compute times are the medians of its runs; the speed-ups divide those medians.\n");
     }
     if let Some(best) = rows
         .iter()
@@ -644,7 +693,7 @@ fn extrapolate(c: &Costs, rows: &[Row], depth: f64) -> String {
 mod tests {
     use super::*;
 
-    fn row(cell: f64, flux: f64, pours: Vec<f64>, pour_walls: Vec<f64>) -> Row {
+    fn row(cell: f64, flux: f64, pours: Vec<f64>, walls: Vec<f64>) -> Row {
         let sample = Sample {
             grains: 100.0,
             points: 0.0,
@@ -664,7 +713,7 @@ mod tests {
             sample,
             flux,
             pours,
-            pour_walls,
+            walls,
             profile: vec![(1.0, 0.0), (1.0, 0.1), (1.0, 0.2)],
         }
     }
@@ -675,7 +724,7 @@ mod tests {
     fn the_hybrid_is_compared_with_the_mean_of_the_pours() {
         let rows = [
             row(0.0, 36.0, vec![36.0, 30.0, 33.0], vec![1.0, 1.2, 0.8]),
-            row(0.004, 36.3, Vec::new(), Vec::new()),
+            row(0.004, 36.3, Vec::new(), vec![0.1, 0.12, 0.08]),
         ];
         assert_eq!(dem_flux(&rows, 5e-4), 33.0);
         assert_eq!(mean_sd(&[36.0, 30.0, 33.0]), (33.0, 3.0));
@@ -701,6 +750,35 @@ mod tests {
             md.contains("on its 3 pours: 36.000, 30.000, 33.000 kg/(m s); its wall time: 1.0, 1.2, 0.8 s"),
             "{md}"
         );
+        assert!(md.contains("H = 4 mm, discrete 100%, run after each pour: 0.1, 0.1, 0.1 s"), "{md}");
+    }
+
+    /// A row's times are the medians of its runs, its counts the first run's.
+    #[test]
+    fn a_row_takes_the_median_times_of_its_runs() {
+        let run = |wall: f64, dem: f64, mpm: f64| Sample {
+            grains: 100.0,
+            points: 50.0,
+            substeps: 20,
+            steps: 10,
+            wall,
+            dem_step: dem,
+            mpm_step: mpm,
+        };
+        // One slow run of four: the median is the middle pair's mean, the outlier ignored.
+        let runs = [
+            run(22.7, 1e-3, 4e-3),
+            run(45.1, 9e-3, 6e-3),
+            run(22.2, 2e-3, 3e-3),
+            run(23.2, 3e-3, 5e-3),
+        ];
+        let m = median_time(runs[0], &runs);
+        for (got, want) in [(m.wall, 22.95), (m.dem_step, 2.5e-3), (m.mpm_step, 4.5e-3)] {
+            assert!((got - want).abs() < 1e-12 * want, "{got} against {want}");
+        }
+        assert_eq!(median_time(runs[0], &runs[..3]).wall, 22.7);
+        assert_eq!((m.grains, m.points, m.substeps, m.steps), (100.0, 50.0, 20, 10));
+        assert_eq!(median_time(runs[1], &[]), runs[1]);
     }
 
     /// A plug riding on a slip at the floor carries a shear profile's flux with another
