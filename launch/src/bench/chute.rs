@@ -508,12 +508,7 @@ fn median_time(first: Sample, runs: &[Sample]) -> Sample {
     if runs.is_empty() {
         return first;
     }
-    let median = |f: fn(&Sample) -> f64| {
-        let mut v: Vec<f64> = runs.iter().map(f).collect();
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
-    };
+    let median = |f: fn(&Sample) -> f64| grains_oracle::band::percentile(&runs.iter().map(f).collect::<Vec<_>>(), 0.5);
     Sample {
         wall: median(|s| s.wall),
         dem_step: median(|s| s.dem_step),
@@ -527,8 +522,9 @@ fn table(args: &ChuteArgs, rows: &[Row], costs: Option<&Costs>) -> String {
         "# grains bench chute\n\nYue 2018 §5: the periodic chute ({LENGTH} m × {} m layer, 22°) of `scenes/{SCENE}`, {} s simulated \
          from a poured packing per grain size; both models at their stable steps, the pure DEM on two threads, the hybrid's \
          solvers on two each. F: the hybrid's grains over the pure DEM's at the start. Speed-up: the DEM's wall time over the \
-         hybrid's (with several pours, the medians of their runs: each hybrid runs after every pour). Flux: Σ m v_x / L at the end of the window; the hybrids run on the first pour and are compared with the mean \
-         of the pure DEM over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
+         hybrid's (with several pours, the medians of their runs: each hybrid runs after every pour). Flux: Σ m v_x / L \
+         at the end of the window; the hybrids run on the first pour and are compared with the mean of the pure DEM \
+         over {} pour(s) (`run.seed` 1 to N; its row: mean ± standard deviation). Coupled band: {} cell(s). \
          Discrete base over the floor: {:.1} mm. Continuum: {}.\n\n\
          Surface: the mean down-slope velocity of the top {:.0}% of the mass; profile L1: Σ m |v − v_DEM| / Σ m |v_DEM| over \
          {} mm slabs above the floor (the pure DEM's over its pours), at the end of the window: a flux can agree while the \
