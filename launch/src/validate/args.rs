@@ -127,6 +127,12 @@ pub struct ValidateArgs {
     /// 1-mm grains; the cell is the period over a whole number of cells, so 8 gives 7.5).
     #[arg(long = "shear-large-cells", default_value_t = 8.0, value_parser = positive_d50)]
     pub shear_large_cells: f64,
+    /// Height the silo is filled to over its bottom [m] (`--part silo` and `--part cost`):
+    /// the scene's 0.06 by default; taller silos are poured and run in a box raised to hold
+    /// them (the orifice, the bin and the grains the same), where the continuum takes more of
+    /// the material.
+    #[arg(long = "silo-fill", default_value_t = super::scenes::silo::FILL, value_parser = silo_fill)]
+    pub silo_fill: f64,
     /// What holds the DEM biaxial sample's sides at the confining pressure (`--part
     /// biaxial`): `fluid` (the pressure on the packing's surface on a grid, as the MPM's
     /// confining fluid takes it: `grains_dem::fluid`; Chen 2021 App. B's membrane also acts
@@ -154,6 +160,14 @@ fn positive_d50(s: &str) -> Result<f64, String> {
         Ok(v) if v.is_finite() && v >= 1.0 => Ok(v),
         Ok(v) => Err(format!("{v} D50: a cell must be at least 1 D50")),
         Err(e) => Err(format!("{s:?}: {e} (a number of D50, e.g. 8)")),
+    }
+}
+
+fn silo_fill(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.02..=2.0).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} m: the fill must be 0.02 to 2 m (the scene's is 0.06)")),
+        Err(e) => Err(format!("{s:?}: {e} (a height in m, e.g. 0.25)")),
     }
 }
 
@@ -242,6 +256,18 @@ mod tests {
             ["--shear-large-cells", "eight"],
         ] {
             let e = parsed(&bad).err().unwrap_or_else(|| panic!("{bad:?} was taken"));
+            assert_eq!(e.kind(), clap::error::ErrorKind::ValueValidation, "{bad:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_silo_fill_defaults_to_the_scene_s_and_refuses_what_cannot_be_a_fill() {
+        let parsed = |extra: &[&str]| Wrapper::try_parse_from(std::iter::once("validate").chain(extra.iter().copied()));
+        assert_eq!(parsed(&[]).unwrap().args.silo_fill, 0.06);
+        assert_eq!(parsed(&["--silo-fill", "0.25"]).unwrap().args.silo_fill, 0.25);
+        for bad in ["0", "-0.1", "3", "nan", "tall"] {
+            let arg = format!("--silo-fill={bad}");
+            let e = parsed(&[arg.as_str()]).err().unwrap_or_else(|| panic!("{bad:?} was taken"));
             assert_eq!(e.kind(), clap::error::ErrorKind::ValueValidation, "{bad:?}: {e}");
         }
     }

@@ -75,7 +75,11 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
         Some(([0.0, 0.0], [1.15 * reach, 1.15 * (BOTTOM + L0)])),
     )?;
     let silo = silo_rows(args)?;
-    table(&mut md, "Silo, 6-mm orifice (error: discharge rate)", &silo, false);
+    let silo_title = format!(
+        "Silo, 6-mm orifice, filled to {:.0} mm (error: discharge rate)",
+        args.silo_fill * 1e3
+    );
+    table(&mut md, &silo_title, &silo, false);
     let labelled: Vec<(String, &std::path::Path)> = by_family(&silo).into_iter().flatten().collect();
     let runs: Vec<(&str, &std::path::Path)> = labelled.iter().map(|(l, d)| (l.as_str(), *d)).collect();
     super::pictures::side_by_side(

@@ -76,14 +76,28 @@ pub fn coarse_column(args: &ValidateArgs, s: f64, grain: &[String]) -> anyhow::R
 
 /// The silo's fill: the bottom closed, a lattice 80 mm tall settling to about 62 mm.
 pub fn silo(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
-    use scenes::silo::{BOTTOM, SCENE};
-    let overrides = vec![
+    use scenes::silo::{BOTTOM, FILL, LATTICE, SCENE};
+    let fill = args.silo_fill;
+    let mut overrides = vec![
         "body.0.model=\"dem\"".into(),
         "body.0.max=[0.04,0.14]".into(),
         format!("wall.0.to=[0.04,{BOTTOM}]"),
         "run.duration=0.35".into(),
     ];
-    poured(args, "packing_silo_60mm_seed1.data", SCENE, overrides)
+    if fill == FILL {
+        return poured(args, "packing_silo_60mm_seed1.data", SCENE, overrides);
+    }
+    // A taller lattice, in the raised box, settling for its fall and 0.25 s more.
+    let lattice = LATTICE * fill;
+    let settle = ((2.0 * lattice / 9.81).sqrt() + 0.25) * 100.0;
+    overrides.truncate(1);
+    overrides.extend(super::silo::raised(fill).into_iter().filter(|o| !o.starts_with("body.0.max")));
+    overrides.extend([
+        format!("body.0.max=[0.04,{}]", BOTTOM + lattice),
+        format!("wall.0.to=[0.04,{BOTTOM}]"),
+        format!("run.duration={}", settle.ceil() / 100.0),
+    ]);
+    poured(args, &format!("packing_silo_{:.0}mm_seed1.data", fill * 1e3), SCENE, overrides)
 }
 
 /// The drum at rest, a lattice to 62 mm settling to about half full.

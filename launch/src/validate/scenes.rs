@@ -24,6 +24,10 @@ pub mod silo {
     /// The silo's bottom [m] and the orifice's centre [m].
     pub const BOTTOM: f64 = 0.06;
     pub const CENTRE: f64 = 0.02;
+    /// The scene's fill over the bottom [m], and the lattice poured for it over its own
+    /// height (a lattice settles to about 3/4 of it).
+    pub const FILL: f64 = 0.06;
+    pub const LATTICE: f64 = 4.0 / 3.0;
     /// Mean grain diameter [m].
     pub const D: f64 = 0.001;
 }

@@ -25,7 +25,7 @@ use super::args::ValidateArgs;
 use super::deposit::frames_of;
 use super::packings;
 use super::runs::{SCENE_USE_HEADER, load_with, run_scene, scene_use};
-use super::scenes::silo::{BOTTOM, CENTRE, D, SCENE, SMALL_SCENE};
+use super::scenes::silo::{BOTTOM, CENTRE, D, FILL, LATTICE, SCENE, SMALL_SCENE};
 use super::stats::slope;
 use crate::metrics::MetricsTable;
 use crate::report::Part;
@@ -123,6 +123,22 @@ pub fn flying_share(grains: &[([f64; 3], f64)], orifice: f64) -> (usize, usize) 
     (flying, bin.len())
 }
 
+/// The overrides that raise the silo's box and domain to hold a fill of `fill` [m] over its
+/// bottom, and its body to that fill (none at the scene's own fill: its runs stay the same).
+/// The domain and the box keep the scene's room over the poured lattice, so the pour and the
+/// runs share one grid.
+pub fn raised(fill: f64) -> Vec<String> {
+    if fill == FILL {
+        return Vec::new();
+    }
+    let lattice = BOTTOM + LATTICE * fill;
+    vec![
+        format!("domain.max=[0.046,{}]", lattice + 0.016),
+        format!("wall.2.max=[0.04,{}]", lattice + 0.01),
+        format!("body.0.max=[0.04,{}]", BOTTOM + fill),
+    ]
+}
+
 /// One run of `scene` with `model`; at `orifice` if given (else the scene's, `CLOG_ORIFICE`).
 pub fn run_silo(
     args: &ValidateArgs,
@@ -140,6 +156,7 @@ pub fn run_silo(
         overrides.push(format!("wall.1.from=[{},{BOTTOM}]", CENTRE + w / 2.0));
     }
     let orifice = orifice.unwrap_or(CLOG_ORIFICE);
+    overrides.extend(raised(args.silo_fill));
     match model {
         Model::Dem => overrides.push("body.0.model=\"dem\"".into()),
         Model::Mpm if scene == SCENE => overrides.extend([
@@ -292,7 +309,7 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
     let scene = load_with(&args.scenes.join(SCENE), &[])?;
     let all = run_all(args, &packing)?;
     let mut md = String::new();
-    rates_section(&mut md, &mut part, &scene, &all)?;
+    rates_section(&mut md, &mut part, &scene, &all, args.silo_fill)?;
     if all.orifices.len() >= 4 {
         beverloo_section(&mut md, &mut part, args, &scene, &all)?;
     }
@@ -319,15 +336,16 @@ pub fn validate(args: &ValidateArgs) -> anyhow::Result<Part> {
 }
 
 /// The discharge rates against the DEM's, and the check at the reference orifice.
-fn rates_section(md: &mut String, part: &mut Part, scene: &grains_protocol::scene::Scene, all: &Runs) -> anyhow::Result<()> {
+fn rates_section(md: &mut String, part: &mut Part, scene: &grains_protocol::scene::Scene, all: &Runs, fill: f64) -> anyhow::Result<()> {
     let runs = &all.runs;
     let rate = |m: Model, w: f64| all.rate(m, w);
     writeln!(md, "## Silo discharge: DEM, hybrid (adaptive zones), MPM\n")?;
     writeln!(
         md,
-        "Scene `{SCENE}` (a 40 mm silo filled to 60 mm from one poured packing; the hybrid's zones move every {} steps). \
+        "Scene `{SCENE}` (a 40 mm silo filled to {:.0} mm from one poured packing; the hybrid's zones move every {} steps). \
          Discharge rate W = slope of the mass below the bottom over t in [{}, {}] s. Reference: the pure DEM run \
          of the same packing (issue 6: hybrid within {:.0}%).\n",
+        fill * 1e3,
         scene.oracle.as_ref().map_or(0, |o| o.every),
         WINDOW.0,
         WINDOW.1,
@@ -569,6 +587,44 @@ fn discharge_outputs(md: &mut String, part: &mut Part, args: &ValidateArgs, all:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_raised_silo_holds_its_fill_in_both_scenes_and_the_scene_s_own_fill_is_left_alone() {
+        use grains_protocol::scene::WallShape;
+        assert!(raised(FILL).is_empty());
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+        // The formula at the scene's fill gives the scene's box and domain: a raised silo
+        // keeps the scene's room over its lattice.
+        let box_top = |scene: &grains_protocol::scene::Scene| match scene.walls[2].shape {
+            WallShape::Box { max, .. } => max[1],
+            ref other => panic!("wall 2 is not the silo's box: {other:?}"),
+        };
+        for name in [SCENE, SMALL_SCENE] {
+            let own = load_with(&dir.join(name), &[]).unwrap();
+            let lattice = BOTTOM + LATTICE * FILL;
+            assert!(
+                (own.domain.max[1] - (lattice + 0.016)).abs() < 1e-12,
+                "{name}: domain top {}",
+                own.domain.max[1]
+            );
+            assert!(
+                (box_top(&own) - (lattice + 0.01)).abs() < 1e-12,
+                "{name}: box top {}",
+                box_top(&own)
+            );
+            let fill = 0.25;
+            let tall = load_with(&dir.join(name), &raised(fill)).unwrap();
+            let lattice = BOTTOM + LATTICE * fill;
+            assert!((tall.domain.max[1] - (lattice + 0.016)).abs() < 1e-12);
+            assert!((box_top(&tall) - (lattice + 0.01)).abs() < 1e-12);
+            match tall.bodies[0].shape {
+                grains_protocol::scene::Shape::Box { max, .. } => assert!((max[1] - (BOTTOM + fill)).abs() < 1e-12),
+                ref other => panic!("{name}: body 0 is not a box: {other:?}"),
+            }
+            // Nothing else moves: the orifice and the bin are the scene's.
+            assert_eq!(tall.walls[..2], own.walls[..2]);
+        }
+    }
 
     #[test]
     fn a_beverloo_law_is_recovered_from_its_own_rates() {
