@@ -47,8 +47,14 @@ def main():
                 fail(f"the state has no {key!r}: {state}")
         print(f"latest: step {state['step']}, {state['grains']} grains, KE {state['kinetic_energy']:.3e} J")
 
-        # The latest view of the grains: all of them here (fewer than 5,000), 3D positions.
+        # The latest view of the grains: all of them here (fewer than 5,000), 3D positions,
+        # taken once some grains have reached the floor (a loaded machine runs the fall slower
+        # than the summaries above take).
+        deadline = time.monotonic() + 60.0
         view = grains.view(run, "dem")
+        while not (view.positions[:, 1] < view.sizes - 1e-9).any() and time.monotonic() < deadline:
+            time.sleep(0.2)
+            view = grains.view(run, "dem")
         n = state["grains"]
         if not (view.total == n and view.ids.shape == (n,) and view.positions.shape == (n, 3) and view.sizes.shape == (n,)):
             fail(f"view of {len(view.ids)} of {view.total} grains, positions {view.positions.shape}; the run has {n}")
