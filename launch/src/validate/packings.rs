@@ -90,13 +90,9 @@ pub fn silo(args: &ValidateArgs) -> anyhow::Result<PathBuf> {
     // A taller lattice, in the raised box, settling for its fall and 0.25 s more.
     let lattice = LATTICE * fill;
     let settle = ((2.0 * lattice / 9.81).sqrt() + 0.25) * 100.0;
-    overrides.truncate(1);
-    overrides.extend(super::silo::raised(fill).into_iter().filter(|o| !o.starts_with("body.0.max")));
-    overrides.extend([
-        format!("body.0.max=[0.04,{}]", BOTTOM + lattice),
-        format!("wall.0.to=[0.04,{BOTTOM}]"),
-        format!("run.duration={}", settle.ceil() / 100.0),
-    ]);
+    overrides[1] = format!("body.0.max=[0.04,{}]", BOTTOM + lattice);
+    overrides[3] = format!("run.duration={}", settle.ceil() / 100.0);
+    overrides.extend(super::silo::room(fill));
     poured(args, &format!("packing_silo_{:.0}mm_seed1.data", fill * 1e3), SCENE, overrides)
 }
 

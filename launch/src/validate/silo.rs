@@ -123,11 +123,10 @@ pub fn flying_share(grains: &[([f64; 3], f64)], orifice: f64) -> (usize, usize) 
     (flying, bin.len())
 }
 
-/// The overrides that raise the silo's box and domain to hold a fill of `fill` [m] over its
-/// bottom, and its body to that fill (none at the scene's own fill: its runs stay the same).
-/// The domain and the box keep the scene's room over the poured lattice, so the pour and the
-/// runs share one grid.
-pub fn raised(fill: f64) -> Vec<String> {
+/// The overrides that raise the silo's box and domain to hold the lattice poured for a fill
+/// of `fill` [m] over its bottom, keeping the scene's room over it, so that the pour and the
+/// runs share one grid (none at the scene's own fill: its runs stay the same).
+pub fn room(fill: f64) -> Vec<String> {
     if fill == FILL {
         return Vec::new();
     }
@@ -135,8 +134,16 @@ pub fn raised(fill: f64) -> Vec<String> {
     vec![
         format!("domain.max=[0.046,{}]", lattice + 0.016),
         format!("wall.2.max=[0.04,{}]", lattice + 0.01),
-        format!("body.0.max=[0.04,{}]", BOTTOM + fill),
     ]
+}
+
+/// [`room`] for a fill of `fill`, and the silo's body filled to it (what a run takes).
+pub fn raised(fill: f64) -> Vec<String> {
+    let mut overrides = room(fill);
+    if fill != FILL {
+        overrides.push(format!("body.0.max=[0.04,{}]", BOTTOM + fill));
+    }
+    overrides
 }
 
 /// One run of `scene` with `model`; at `orifice` if given (else the scene's, `CLOG_ORIFICE`).
