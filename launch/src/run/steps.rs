@@ -27,7 +27,7 @@ pub enum Limit {
 }
 
 /// The steps chosen for a scene with `substeps = "auto"`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Chosen {
     pub substeps: u32,
     /// The macro-step (the MPM's step) [s].
@@ -39,6 +39,11 @@ pub struct Chosen {
     pub mpm_limit: f64,
     pub requested: f64,
     pub limit: Limit,
+    /// The cadences counted in macro-steps that the new step rescaled to keep their length in
+    /// time, as (field, steps of `run.dt` in the file, macro-steps now). Said aloud because the
+    /// file's count is in steps of `run.dt`, the upper bound: `oracle.every = 50` with `run.dt =
+    /// 1e-3` is every 50 ms, however small the chosen step.
+    pub cadences: Vec<(&'static str, u64, u64)>,
 }
 
 impl std::fmt::Display for Chosen {
@@ -54,7 +59,12 @@ impl std::fmt::Display for Chosen {
             "coupling.substeps = \"auto\": k = {} DEM steps of {:.3e} s per macro-step of {:.3e} s, set by {why} \
              (DEM stable step {:.3e} s, MPM stable step {:.3e} s, run.dt {:.3e} s)",
             self.substeps, self.dem_dt, self.dt, self.dem_limit, self.mpm_limit, self.requested
-        )
+        )?;
+        for (i, (field, from, to)) in self.cadences.iter().enumerate() {
+            let lead = if i == 0 { "; kept in time: " } else { ", " };
+            write!(f, "{lead}{field} {from} → {to} steps ({:.2} ms)", *to as f64 * self.dt * 1e3)?;
+        }
+        Ok(())
     }
 }
 
@@ -102,6 +112,7 @@ pub fn choose(requested: f64, dem_dt: Option<f64>, dem_limit: f64, mpm_limit: f6
         mpm_limit,
         requested,
         limit,
+        cadences: Vec::new(),
     })
 }
 
@@ -118,9 +129,31 @@ pub fn load(path: &Path, overrides: &[String]) -> anyhow::Result<(Scene, String,
     let Some(mpm_limit) = grains_mpm_service::setup::stable_step(&scene) else {
         anyhow::bail!("{}: coupling.substeps = \"auto\" needs MPM material", path.display());
     };
-    let chosen = choose(scene.dt, auto.dem_dt, dem_limit, mpm_limit)?;
-    let (scene, text) = scene::with_resolved_steps(&text, &scene, chosen.dt, chosen.substeps, chosen.dem_dt)?;
-    Ok((scene, text, Some(chosen)))
+    let mut chosen = choose(scene.dt, auto.dem_dt, dem_limit, mpm_limit)?;
+    let (resolved, text) = scene::with_resolved_steps(&text, &scene, chosen.dt, chosen.substeps, chosen.dem_dt)?;
+    let pairs = [
+        (
+            "oracle.every",
+            scene.oracle.as_ref().map(|o| o.every),
+            resolved.oracle.as_ref().map(|o| o.every),
+        ),
+        (
+            "output.frames_every",
+            Some(scene.output.frames_every),
+            Some(resolved.output.frames_every),
+        ),
+        (
+            "output.checkpoint_every",
+            Some(scene.output.checkpoint_every),
+            Some(resolved.output.checkpoint_every),
+        ),
+    ];
+    chosen.cadences = pairs
+        .into_iter()
+        .filter_map(|(field, from, to)| Some((field, from?, to?)))
+        .filter(|(_, from, to)| from != to)
+        .collect();
+    Ok((resolved, text, Some(chosen)))
 }
 
 #[cfg(test)]
@@ -159,5 +192,42 @@ mod tests {
                 assert!(ok(&c), "{c:?}");
             }
         }
+    }
+
+    /// A cadence the file counts in steps of `run.dt` keeps its length in time, and the
+    /// choice says so: the silo with `run.dt = 1e-3` as the bound and the oracle every 50 of
+    /// those steps runs its oracle every 641 macro-steps of 7.8e-5 s (50 ms), not every 50.
+    #[test]
+    fn rescaled_cadences_are_named_with_their_length_in_time() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/silo_hybrid_2d.toml");
+        let overrides = [
+            "coupling.substeps=\"auto\"",
+            "coupling.dem_dt=2e-6",
+            "run.dt=1e-3",
+            "oracle.every=50",
+            "output.frames_every=10",
+        ];
+        let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+        let (scene, _, chosen) = load(&path, &overrides).unwrap();
+        let c = chosen.unwrap();
+        assert_eq!((c.substeps, c.limit), (39, Limit::Mpm));
+        let every = (1e-3 * 50.0 / c.dt).round() as u64;
+        assert_eq!(scene.oracle.as_ref().unwrap().every, every);
+        assert_eq!(
+            c.cadences,
+            vec![
+                ("oracle.every", 50, every),
+                ("output.frames_every", 10, (1e-2 / c.dt).round() as u64)
+            ]
+        );
+        let said = c.to_string();
+        assert!(
+            said.contains(&format!("kept in time: oracle.every 50 → {every} steps (50.00 ms)")),
+            "{said}"
+        );
+        // Without a rescale nothing more is said.
+        let mut same = c.clone();
+        same.cadences.clear();
+        assert!(!same.to_string().contains("kept in time"));
     }
 }
