@@ -43,7 +43,7 @@ pub struct Chosen {
     /// time, as (field, steps of `run.dt` in the file, macro-steps now). Said aloud because the
     /// file's count is in steps of `run.dt`, the upper bound: `oracle.every = 50` with `run.dt =
     /// 1e-3` is every 50 ms, however small the chosen step.
-    pub cadences: Vec<(&'static str, u64, u64)>,
+    pub cadences: Vec<(String, u64, u64)>,
 }
 
 impl std::fmt::Display for Chosen {
@@ -130,29 +130,8 @@ pub fn load(path: &Path, overrides: &[String]) -> anyhow::Result<(Scene, String,
         anyhow::bail!("{}: coupling.substeps = \"auto\" needs MPM material", path.display());
     };
     let mut chosen = choose(scene.dt, auto.dem_dt, dem_limit, mpm_limit)?;
-    let (resolved, text) = scene::with_resolved_steps(&text, &scene, chosen.dt, chosen.substeps, chosen.dem_dt)?;
-    let pairs = [
-        (
-            "oracle.every",
-            scene.oracle.as_ref().map(|o| o.every),
-            resolved.oracle.as_ref().map(|o| o.every),
-        ),
-        (
-            "output.frames_every",
-            Some(scene.output.frames_every),
-            Some(resolved.output.frames_every),
-        ),
-        (
-            "output.checkpoint_every",
-            Some(scene.output.checkpoint_every),
-            Some(resolved.output.checkpoint_every),
-        ),
-    ];
-    chosen.cadences = pairs
-        .into_iter()
-        .filter_map(|(field, from, to)| Some((field, from?, to?)))
-        .filter(|(_, from, to)| from != to)
-        .collect();
+    let (resolved, text, rescaled) = scene::with_resolved_steps(&text, &scene, chosen.dt, chosen.substeps, chosen.dem_dt)?;
+    chosen.cadences = rescaled;
     Ok((resolved, text, Some(chosen)))
 }
 
@@ -216,15 +195,12 @@ mod tests {
         assert_eq!(
             c.cadences,
             vec![
-                ("oracle.every", 50, every),
-                ("output.frames_every", 10, (1e-2 / c.dt).round() as u64)
+                ("output.frames_every".to_string(), 10, (1e-2 / c.dt).round() as u64),
+                ("oracle.every".to_string(), 50, every),
             ]
         );
         let said = c.to_string();
-        assert!(
-            said.contains(&format!("kept in time: oracle.every 50 → {every} steps (50.00 ms)")),
-            "{said}"
-        );
+        assert!(said.contains(&format!("oracle.every 50 → {every} steps (50.00 ms)")), "{said}");
         // Without a rescale nothing more is said.
         let mut same = c.clone();
         same.cadences.clear();

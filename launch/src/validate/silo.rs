@@ -44,7 +44,7 @@ const CLOG_TAIL: f64 = 0.2;
 /// on the bottom sink into its node-based wall, up to 1.5 mm in 0.5 s (the hybrid at 6 mm:
 /// 22 points at 0.1 s, 40 at 0.45 s, which counted as discharged added 5% to its rate);
 /// grains on the bottom stay above it.
-pub const OUT: f64 = 2.0 * D;
+const OUT: f64 = 2.0 * D;
 const RATE_TOLERANCE: f64 = 0.15;
 /// Orifice widths of the Beverloo fit [m]: whole cells of the MPM-only runs' grid, whose
 /// node-based walls open (w / h − 1) nodes, as wide as w (the DEM clogs at 4 mm, measured);
@@ -226,7 +226,7 @@ pub fn run_silo(
 
 /// The mass of `points` (grains or material points) with `mass` that has left the silo: more
 /// than [`OUT`] below its bottom.
-pub fn mass_out(points: &[[f64; 3]], mass: &[f64]) -> f64 {
+fn mass_out(points: &[[f64; 3]], mass: &[f64]) -> f64 {
     points.iter().zip(mass).filter(|(x, _)| x[1] < BOTTOM - OUT).map(|(_, m)| m).sum()
 }
 

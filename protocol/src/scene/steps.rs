@@ -10,8 +10,15 @@ use super::{Scene, from_str, hash_bytes};
 /// `coupling.substeps = substeps` and `coupling.dem_dt = dem_dt` (the DEM step they make,
 /// stated). Cadences counted in macro-steps (`run.steps`,
 /// `output.frames_every`, `output.checkpoint_every`, `oracle.every`, where the file gives them) are rescaled to keep
-/// their length in time (at least 1); `run.duration` stays as it is.
-pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32, dem_dt: f64) -> Result<(Scene, String), SceneError> {
+/// their length in time (at least 1); `run.duration` stays as it is. Also returns the cadences
+/// that changed, as (field, count in the file, count now).
+pub fn with_resolved_steps(
+    text: &str,
+    scene: &Scene,
+    dt: f64,
+    substeps: u32,
+    dem_dt: f64,
+) -> Result<(Scene, String, Vec<(String, u64, u64)>), SceneError> {
     let plain = |message: String| SceneError {
         path: scene.path.clone(),
         line_col: None,
@@ -27,10 +34,15 @@ pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32, de
         FieldPath::root("output").key("checkpoint_every"),
         FieldPath::root("oracle").key("every"),
     ];
+    let mut rescaled = Vec::new();
     for path in counts {
         // frames_every = 0 (no frames) stays 0.
         if let Some(n) = get_integer(&doc, &path).filter(|&n| n > 0) {
-            path.set(&mut doc, toml::Value::Integer(rescale(n))).map_err(plain)?;
+            let now = rescale(n);
+            path.set(&mut doc, toml::Value::Integer(now)).map_err(plain)?;
+            if now != n {
+                rescaled.push((path.to_string(), n as u64, now as u64));
+            }
         }
     }
     FieldPath::root("run")
@@ -51,7 +63,7 @@ pub fn with_resolved_steps(text: &str, scene: &Scene, dt: f64, substeps: u32, de
         e.line_col = None;
         e
     })?;
-    Ok((resolved, text))
+    Ok((resolved, text, rescaled))
 }
 
 fn get_integer(doc: &toml::Value, path: &FieldPath) -> Option<i64> {
