@@ -43,7 +43,7 @@ pub struct Chosen {
     /// time, as (field, steps of `run.dt` in the file, macro-steps now). Said aloud because the
     /// file's count is in steps of `run.dt`, the upper bound: `oracle.every = 50` with `run.dt =
     /// 1e-3` is every 50 ms, however small the chosen step.
-    pub cadences: Vec<(String, u64, u64)>,
+    pub cadences: scene::Rescaled,
 }
 
 impl std::fmt::Display for Chosen {

@@ -42,7 +42,7 @@ pub use output::Output;
 pub use overrides::{FieldPath, Override, OverrideParseError, PathSegment};
 pub use rigid::{Rigid, RigidMotion, check_polygon};
 pub use run::Dimension;
-pub use steps::with_resolved_steps;
+pub use steps::{Rescaled, with_resolved_steps};
 pub use synthetic::{Synthetic, SyntheticContent};
 pub use walls::{Wall, WallShape};
 

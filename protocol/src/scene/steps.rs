@@ -6,6 +6,9 @@ use super::errors::SceneError;
 use super::overrides::FieldPath;
 use super::{Scene, from_str, hash_bytes};
 
+/// Cadences a new step rescaled: (field, count in the file, count now).
+pub type Rescaled = Vec<(String, u64, u64)>;
+
 /// `text` (a scene with `substeps = "auto"`, validated as `scene`) with `run.dt = dt`,
 /// `coupling.substeps = substeps` and `coupling.dem_dt = dem_dt` (the DEM step they make,
 /// stated). Cadences counted in macro-steps (`run.steps`,
@@ -18,7 +21,7 @@ pub fn with_resolved_steps(
     dt: f64,
     substeps: u32,
     dem_dt: f64,
-) -> Result<(Scene, String, Vec<(String, u64, u64)>), SceneError> {
+) -> Result<(Scene, String, Rescaled), SceneError> {
     let plain = |message: String| SceneError {
         path: scene.path.clone(),
         line_col: None,
